@@ -1,0 +1,299 @@
+"""Powered-descent environments: a Gymnasium env and a batched vector env over one step function.
+
+Episodes end (terminated) on the first step whose altitude is below 0.01 m (Sec. 4.2), landed or
+not; they are truncated, not terminated, at `max_time_s` (MAX_EPISODE_TIME_S, ours), so the value
+of a state at the time limit is still bootstrapped by learners.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils.seeding import np_random
+
+from pd_core import dynamics
+from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
+from pd_core.config import (
+    DT_S,
+    MAX_EPISODE_TIME_S,
+    REWARD,
+    STATE_SCALE,
+    TABLE3,
+    RewardConfig,
+    StateRange,
+)
+from pd_core.disturbance import force_at, sample_knots
+from pd_core.reward import landed as landed_condition
+from pd_core.reward import reward as shaped_reward
+from pd_core.reward import reward_scalar
+from pd_core.state import check_state, scale_state
+
+
+class Status(IntEnum):
+    """Episode status; the numbers match pd_interfaces/msg/LanderState."""
+
+    FLYING = 0
+    LANDED = 1
+    CRASHED = 2
+    OUT_OF_TIME = 3
+
+
+def transition(
+    state: np.ndarray,
+    thrust_n: np.ndarray,
+    force_n: np.ndarray,
+    dt_s: float = DT_S,
+    reward_cfg: RewardConfig = REWARD,
+    thrust_max_n: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One environment step for states (..., 7): (next_state, reward, terminated, landed).
+
+    The single env, the vector env, the demonstrations and the simulator node all call this.
+    """
+    nxt = dynamics.step(state, thrust_n, force_n, dt_s)
+    pos, vel = nxt[..., 0:3], nxt[..., 3:6]
+    ok = landed_condition(pos, vel, reward_cfg)
+    r = shaped_reward(pos, vel, thrust_n, reward_cfg, thrust_max_n)
+    return nxt, r, pos[..., 2] < reward_cfg.touchdown_altitude_m, ok
+
+
+def transition_scalar(
+    state: tuple[float, ...],
+    thrust_n: tuple[float, float, float],
+    force_n: tuple[float, float, float],
+    dt_s: float = DT_S,
+    reward_cfg: RewardConfig = REWARD,
+    thrust_max_n: tuple[float, float, float] | None = None,
+) -> tuple[tuple[float, ...], float, bool, bool]:
+    """`transition` for one lander on Python floats (tests hold the two equal to 1e-12)."""
+    nxt = dynamics.step_scalar(state, thrust_n, force_n, dt_s)
+    r, ok = reward_scalar(nxt, thrust_n, reward_cfg, thrust_max_n)
+    return nxt, r, nxt[2] < reward_cfg.touchdown_altitude_m, ok
+
+
+def sample_initial_state(rng: np.random.Generator, box: StateRange = TABLE3) -> np.ndarray:
+    """Uniform initial state (7,) over a box of Table 1 or 3."""
+    return rng.uniform(box.lo, box.hi)
+
+
+def status_of(terminated: bool, landed: bool, truncated: bool) -> Status:
+    if terminated:
+        return Status.LANDED if landed else Status.CRASHED
+    return Status.OUT_OF_TIME if truncated else Status.FLYING
+
+
+# Scaled states of anything `check_state` accepts lie well inside +-1e4.
+_OBS_SPACE = spaces.Box(-1e4, 1e4, shape=(7,), dtype=np.float32)
+_SCALE = tuple(float(v) for v in STATE_SCALE)
+
+
+def _scaled(state: tuple[float, ...]) -> np.ndarray:
+    return np.array([v * s for v, s in zip(state, _SCALE)], dtype=np.float32)
+
+
+class PoweredDescentEnv(gym.Env):
+    """3-DOF Mars lander with 147 discrete thrust actions and the reward of Eq. 12.
+
+    Observation: the scaled state of Eqs. 20-21. `info["state"]` holds the physical state.
+    reset(options={"initial_state": [x, y, z, vx, vy, vz, m]}) starts from a given state,
+    otherwise uniformly over `initial_range` (Table 3).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(
+        self,
+        disturbance: bool = True,
+        max_time_s: float = MAX_EPISODE_TIME_S,
+        initial_range: StateRange = TABLE3,
+        actions: ActionSpace = DEFAULT_ACTIONS,
+        reward_cfg: RewardConfig = REWARD,
+        dt_s: float = DT_S,
+    ) -> None:
+        self.disturbance = disturbance
+        self.max_steps = round(max_time_s / dt_s)
+        self.initial_range = initial_range
+        self.actions = actions
+        self.reward_cfg = reward_cfg
+        self.dt_s = dt_s
+        self.action_space = spaces.Discrete(actions.n)
+        self.observation_space = _OBS_SPACE
+        self._state: tuple[float, ...] = (0.0,) * 7
+        self._initial: tuple[float, ...] = (0.0,) * 7
+        self._knots: list[list[float]] = [[0.0] * 3] * 2
+        self._table = [tuple(t) for t in actions.table_n.tolist()]
+        self._thrust_max = tuple(float(v) for v in actions.limits.hi)
+        self._steps = 0
+
+    @property
+    def state(self) -> np.ndarray:
+        """Physical state [x, y, z, vx, vy, vz, m] (m, m/s, kg)."""
+        return np.array(self._state)
+
+    @property
+    def time_s(self) -> float:
+        return self._steps * self.dt_s
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        if options.get("initial_state") is not None:
+            state = check_state(options["initial_state"]).reshape(7)
+        else:
+            state = sample_initial_state(self.np_random, self.initial_range)
+        self._state = tuple(state.tolist())
+        self._initial = self._state
+        self._knots = sample_knots(self.np_random, self.max_steps * self.dt_s).tolist()
+        self._steps = 0
+        return _scaled(self._state), {"state": state}
+
+    def disturbance_force(self) -> tuple[float, float, float]:
+        """F_env (N) applied over the next step: its mean, the value at the step's midpoint.
+
+        dt divides the 1 s knot interval, so a step never straddles a knot and the midpoint
+        value of the linear interpolation is its exact average over the step.
+        """
+        if not self.disturbance:
+            return (0.0, 0.0, 0.0)
+        t = (self._steps + 0.5) * self.dt_s
+        i = min(int(t), len(self._knots) - 2)
+        f = min(t - i, 1.0)
+        a, b = self._knots[i], self._knots[i + 1]
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if not isinstance(action, (int, np.integer)) or not 0 <= action < len(self._table):
+            raise ValueError(
+                f"action must be an integer in [0, {len(self._table)}), got {action!r}"
+            )
+        return self.step_thrust(self._table[action])
+
+    def step_thrust(
+        self, thrust_n: tuple[float, float, float] | np.ndarray
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Step with a thrust vector (N) instead of an action index (used for demonstrations)."""
+        if isinstance(thrust_n, np.ndarray):
+            thrust_n = tuple(thrust_n.tolist())
+        nxt, r, terminated, ok = transition_scalar(
+            self._state,
+            thrust_n,
+            self.disturbance_force(),
+            self.dt_s,
+            self.reward_cfg,
+            self._thrust_max,
+        )
+        self._state = nxt
+        self._steps += 1
+        truncated = (not terminated) and self._steps >= self.max_steps
+        info = {
+            "state": np.array(nxt),
+            "landed": ok and terminated,
+            "status": int(status_of(terminated, ok, truncated)),
+            "time_s": self._steps * self.dt_s,
+            "fuel_kg": self._initial[6] - nxt[6],
+        }
+        return _scaled(nxt), r, terminated, truncated, info
+
+
+class PoweredDescentVectorEnv:
+    """N independent landers stepped together by `transition`; same-step autoreset.
+
+    Sub-env i seeded with `seed + i` flies exactly what `PoweredDescentEnv` seeded with `seed + i`
+    flies. When an episode ends its final observation/state are in `info["final_obs"]` /
+    `info["final_state"]` and the returned observation is already the next episode's first.
+    """
+
+    def __init__(
+        self,
+        num_envs: int,
+        disturbance: bool = True,
+        max_time_s: float = MAX_EPISODE_TIME_S,
+        initial_range: StateRange = TABLE3,
+        actions: ActionSpace = DEFAULT_ACTIONS,
+        reward_cfg: RewardConfig = REWARD,
+        dt_s: float = DT_S,
+        autoreset: bool = True,
+    ) -> None:
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.num_envs = num_envs
+        self.disturbance = disturbance
+        self.max_steps = round(max_time_s / dt_s)
+        self.initial_range = initial_range
+        self.actions = actions
+        self.reward_cfg = reward_cfg
+        self.dt_s = dt_s
+        self.autoreset = autoreset
+        self.single_action_space = spaces.Discrete(actions.n)
+        self.single_observation_space = _OBS_SPACE
+        self._rngs = [np_random(None)[0] for _ in range(num_envs)]
+        self._duration = self.max_steps * dt_s
+        k = sample_knots(self._rngs[0], self._duration).shape[0]
+        self._knots = np.zeros((num_envs, k, 3))
+        self.states = np.zeros((num_envs, 7))
+        self.initial_states = np.zeros((num_envs, 7))
+        self.steps = np.zeros(num_envs, dtype=np.int64)
+        self._thrust_max = actions.limits.hi
+
+    def _reset_one(self, i: int, initial_state: np.ndarray | None) -> None:
+        rng = self._rngs[i]
+        if initial_state is None:
+            self.states[i] = sample_initial_state(rng, self.initial_range)
+        else:
+            self.states[i] = check_state(initial_state)
+        self.initial_states[i] = self.states[i]
+        self._knots[i] = sample_knots(rng, self._duration)
+        self.steps[i] = 0
+
+    def reset(
+        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if np.isscalar(seed) else list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"need {self.num_envs} seeds, got {len(seeds)}")
+            self._rngs = [np_random(int(s))[0] for s in seeds]
+        init = (options or {}).get("initial_state")
+        for i in range(self.num_envs):
+            self._reset_one(i, None if init is None else np.asarray(init, dtype=float)[i])
+        return scale_state(self.states), {"state": self.states.copy()}
+
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        actions = np.asarray(actions)
+        if actions.shape != (self.num_envs,):
+            raise ValueError(f"need actions of shape ({self.num_envs},), got {actions.shape}")
+        thrust = self.actions.thrust(actions)
+        if self.disturbance:
+            force = force_at(self._knots, (self.steps + 0.5) * self.dt_s)
+        else:
+            force = np.zeros_like(thrust)
+        nxt, r, term, ok = transition(
+            self.states, thrust, force, self.dt_s, self.reward_cfg, self._thrust_max
+        )
+        self.states = nxt
+        self.steps += 1
+        trunc = ~term & (self.steps >= self.max_steps)
+        done = term | trunc
+        info: dict[str, Any] = {
+            "state": nxt.copy(),
+            "landed": ok & term,
+            "fuel_kg": self.initial_states[:, 6] - nxt[:, 6],
+            "steps": self.steps.copy(),
+            "initial_state": self.initial_states.copy(),
+        }
+        obs = scale_state(nxt)
+        if self.autoreset and np.any(done):
+            info["final_obs"] = obs.copy()
+            info["final_state"] = nxt.copy()
+            for i in np.flatnonzero(done):
+                self._reset_one(int(i), None)
+            obs[done] = scale_state(self.states[done])
+        return obs, r, term, trunc, info
