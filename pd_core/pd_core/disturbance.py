@@ -37,6 +37,10 @@ def force_at(
     last = knots_n.shape[-2] - 1
     i0 = np.clip(np.floor(t).astype(np.intp), 0, last - 1)
     frac = np.clip(t - i0, 0.0, 1.0)[..., None]
-    f0 = np.take_along_axis(knots_n, i0[..., None, None], axis=-2)[..., 0, :]
-    f1 = np.take_along_axis(knots_n, (i0 + 1)[..., None, None], axis=-2)[..., 0, :]
+    if knots_n.ndim == 3 and i0.ndim == 1:  # the vector env's case: one time per lander
+        rows = np.arange(knots_n.shape[0])
+        f0, f1 = knots_n[rows, i0], knots_n[rows, i0 + 1]
+    else:
+        f0 = np.take_along_axis(knots_n, i0[..., None, None], axis=-2)[..., 0, :]
+        f1 = np.take_along_axis(knots_n, (i0 + 1)[..., None, None], axis=-2)[..., 0, :]
     return f0 + frac * (f1 - f0)

@@ -57,7 +57,7 @@ def transition(
     nxt = dynamics.step(state, thrust_n, force_n, dt_s)
     pos, vel = nxt[..., 0:3], nxt[..., 3:6]
     ok = landed_condition(pos, vel, reward_cfg)
-    r = shaped_reward(pos, vel, thrust_n, reward_cfg, thrust_max_n)
+    r = shaped_reward(pos, vel, thrust_n, reward_cfg, thrust_max_n, ok)
     return nxt, r, pos[..., 2] < reward_cfg.touchdown_altitude_m, ok
 
 

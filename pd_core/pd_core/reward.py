@@ -15,6 +15,11 @@ import numpy as np
 from pd_core.config import REWARD, RL_THRUST, RewardConfig
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis (3x faster than np.linalg.norm on (N, 3))."""
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
+
+
 def target_velocity(
     position_m: np.ndarray, velocity_mps: np.ndarray, cfg: RewardConfig = REWARD
 ) -> np.ndarray:
@@ -27,8 +32,8 @@ def target_velocity(
     v_hat = velocity_mps.copy()
     v_hat[..., 2] -= np.where(high, cfg.v_offset_high_mps, cfg.v_offset_low_mps)
     tau = np.where(high, cfg.tau_high_s, cfg.tau_low_s)
-    r_norm = np.linalg.norm(r_hat, axis=-1)
-    t_go = r_norm / np.maximum(np.linalg.norm(v_hat, axis=-1), cfg.min_speed_mps)
+    r_norm = _norm(r_hat)
+    t_go = r_norm / np.maximum(_norm(v_hat), cfg.min_speed_mps)
     gain = -cfg.v0_mps * (1.0 - np.exp(-t_go / tau)) / np.maximum(r_norm, cfg.min_range_m)
     return gain[..., None] * r_hat
 
@@ -39,8 +44,8 @@ def landed(
     """The kappa condition of Eq. 12: altitude < 0.01 m, |x| < 5 m, |v| < 2 m/s."""
     return (
         (position_m[..., 2] < cfg.touchdown_altitude_m)
-        & (np.linalg.norm(position_m, axis=-1) < cfg.x_lim_m)
-        & (np.linalg.norm(velocity_mps, axis=-1) < cfg.v_lim_mps)
+        & (_norm(position_m) < cfg.x_lim_m)
+        & (_norm(velocity_mps) < cfg.v_lim_mps)
     )
 
 
@@ -50,12 +55,14 @@ def reward(
     thrust_n: np.ndarray,
     cfg: RewardConfig = REWARD,
     thrust_max_n: np.ndarray | None = None,
+    landed_mask: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Eq. 12. thrust_max_n defaults to the RL limits of Sec. 4.1 (elementwise T / T_max)."""
+    """Eq. 12; pass `landed_mask` if the kappa condition is already computed. thrust_max_n defaults to the RL limits of Sec. 4.1 (elementwise T / T_max)."""
     t_max = RL_THRUST.hi if thrust_max_n is None else thrust_max_n
-    v_err = np.linalg.norm(velocity_mps - target_velocity(position_m, velocity_mps, cfg), axis=-1)
-    effort = np.linalg.norm(thrust_n / t_max, axis=-1)
-    bonus = np.where(landed(position_m, velocity_mps, cfg), cfg.kappa, 0.0)
+    v_err = _norm(velocity_mps - target_velocity(position_m, velocity_mps, cfg))
+    effort = _norm(thrust_n / t_max)
+    ok = landed(position_m, velocity_mps, cfg) if landed_mask is None else landed_mask
+    bonus = np.where(ok, cfg.kappa, 0.0)
     return cfg.alpha * v_err + cfg.beta * effort + cfg.eta + bonus
 
 
