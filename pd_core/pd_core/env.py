@@ -92,7 +92,7 @@ _SCALE = tuple(float(v) for v in STATE_SCALE)
 
 
 def _scaled(state: tuple[float, ...]) -> np.ndarray:
-    return np.array([v * s for v, s in zip(state, _SCALE)], dtype=np.float32)
+    return np.array([v * s for v, s in zip(state, _SCALE, strict=True)], dtype=np.float32)
 
 
 class PoweredDescentEnv(gym.Env):

@@ -1,8 +1,8 @@
 """Trained policies on disk: `save_policy` writes them, `load_policy` checks and loads them.
 
 A policy is two files: `<name>.pt` (the Q-network's tensors, read with
-`torch.load(weights_only=True)` so a model file cannot run code) and `<name>.json` (metadata: network
-shape, action discretisation, thrust limits, state scaling, dt, training config, seed, code
+`torch.load(weights_only=True)` so a model file cannot run code) and `<name>.json` (metadata:
+network shape, action discretisation, thrust limits, state scaling, dt, training config, seed, code
 version). A file whose metadata disagrees with this code is refused with the difference named.
 """
 
@@ -84,7 +84,7 @@ def save_policy(
 
 def _close(a: Any, b: Any) -> bool:
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
-        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b, strict=True))
     if isinstance(a, (int, float)) and isinstance(b, (int, float)):
         return math.isclose(a, b, rel_tol=1e-12, abs_tol=0.0)
     return a == b

@@ -57,7 +57,10 @@ def reward(
     thrust_max_n: np.ndarray | None = None,
     landed_mask: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Eq. 12; pass `landed_mask` if the kappa condition is already computed. thrust_max_n defaults to the RL limits of Sec. 4.1 (elementwise T / T_max)."""
+    """Eq. 12, elementwise T / T_max with T_max the RL limits of Sec. 4.1 by default.
+
+    Pass `landed_mask` when the kappa condition is already computed.
+    """
     t_max = RL_THRUST.hi if thrust_max_n is None else thrust_max_n
     v_err = _norm(velocity_mps - target_velocity(position_m, velocity_mps, cfg))
     effort = _norm(thrust_n / t_max)

@@ -36,7 +36,8 @@ def test_above_15m_with_crossrange():
 
 
 def test_below_15m_branch_targets_vertical_descent():
-    # r_hat = (0,0,10) ignores the 3-4 m offset; v_hat = v - (0,0,-1) = (0,0,-2); t_go = 5; tau = 100
+    # r_hat = (0,0,10) ignores the 3-4 m offset; v_hat = v - (0,0,-1) = (0,0,-2)
+    # t_go = 5 s, tau = 100 s
     target_z = -70 * (1 - math.exp(-0.05))  # -3.41394 m/s
     expected = -0.01 * abs(-3 - target_z) - 0.05 * math.sqrt(3) + 0.01
     assert expected == pytest.approx(-0.08074194322794306, abs=1e-14)
