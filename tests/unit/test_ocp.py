@@ -1,0 +1,128 @@
+"""pd_core.ocp: transcription, gradients, the 33 Table 1 cases, SLSQP agreement, bad requests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pd_core import dynamics, ocp
+from pd_core.demos import table1_initial_states
+
+CASES = table1_initial_states()
+
+
+@pytest.fixture(scope="module")
+def qp_results() -> list[ocp.OCPResult]:
+    return [ocp.solve(s[0:3], s[3:6], s[6]) for s in CASES]
+
+
+def test_closed_form_flight_equals_dynamics_step() -> None:
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-3e3, 3e3, (80, 3)) + [0, 0, 8e3]
+    x0, v0 = np.array([700.0, -500, 2500]), np.array([-40.0, 10, -80])
+    g = ocp._Grid.make(53.37, 80)
+    fl = ocp._fly(p, g, x0, v0, 2000.0)
+    states, times = ocp.fly(x0, v0, 2000.0, p, 53.37)
+    assert times[-1] == pytest.approx(53.37)
+    np.testing.assert_allclose(fl.xf, states[-1, 0:3], atol=1e-9)
+    np.testing.assert_allclose(fl.vf, states[-1, 3:6], atol=1e-10)
+    s = np.array(states[0])
+    for u, dt in zip(g.interp(p), g.dt, strict=True):
+        s = dynamics.step(s, u, np.zeros(3), dt)
+    np.testing.assert_allclose(s, states[-1], atol=1e-9)
+
+
+@pytest.mark.parametrize("objective", ["energy", "fuel"])
+def test_exact_gradients_match_finite_differences(objective: str) -> None:
+    rng = np.random.default_rng(1)
+    p = rng.uniform(-3e3, 3e3, (80, 3)) + [0, 0, 8e3]
+    x0, v0, tf = np.array([700.0, -500, 2500]), np.array([-40.0, 10, -80]), 53.37
+    j, djp, djt, c, dcp, dct = ocp._gradients(p, ocp._Grid.make(tf, 80), x0, v0, 2000.0, objective)
+
+    def f(pp: np.ndarray, t: float) -> tuple[float, np.ndarray]:
+        g = ocp._Grid.make(t, 80)
+        fl = ocp._fly(pp, g, x0, v0, 2000.0)
+        return ocp._objective_value(fl, g, objective), np.concatenate([fl.xf, fl.vf])
+
+    e = np.zeros_like(p)
+    e[17, 1] = 1e-2
+    (jp, cp), (jm, cm) = f(p + e, tf), f(p - e, tf)
+    assert djp[17, 1] == pytest.approx((jp - jm) / 2e-2, rel=1e-6)
+    np.testing.assert_allclose(dcp[:, 17, 1], (cp - cm) / 2e-2, rtol=1e-5, atol=1e-12)
+    (jp, cp), (jm, cm) = f(p, tf + 1e-6), f(p, tf - 1e-6)
+    assert djt == pytest.approx((jp - jm) / 2e-6, rel=1e-5)
+    np.testing.assert_allclose(dct, (cp - cm) / 2e-6, rtol=1e-4, atol=1e-6)
+
+
+def test_all_table1_cases_converge_to_rest_at_the_pad(qp_results: list[ocp.OCPResult]) -> None:
+    assert len(qp_results) == 33
+    for r in qp_results:
+        assert r.success, r.message
+        assert np.linalg.norm(r.final_position) <= 0.3  # Table 4 worst: 0.259 m
+        assert np.linalg.norm(r.final_velocity) <= 0.02  # Table 4 worst: 0.011 m/s
+        assert r.thrust.shape == (80, 3) and r.states.shape == (len(r.state_times), 7)
+        assert np.all(r.thrust >= ocp.OCP_THRUST.lo - 1e-6)
+        assert np.all(r.thrust <= ocp.OCP_THRUST.hi + 1e-6)
+
+
+def test_fuel_range_near_table4(qp_results: list[ocp.OCPResult]) -> None:
+    # Paper: 291.0-550.5 kg. Our exact optimum burns less (min 280 kg, max 439 kg): see README;
+    # the lower bound is held at -5 % and the upper at +2 %.
+    fuel = np.array([r.fuel for r in qp_results])
+    assert fuel.min() >= 0.95 * 291.0
+    assert fuel.max() <= 1.02 * 550.5
+
+
+@pytest.mark.parametrize("case", [2, 23])
+def test_fast_method_matches_slsqp(case: int) -> None:
+    s = CASES[case]
+    fast = ocp.solve(s[0:3], s[3:6], s[6], method="qp")
+    ref = ocp.solve(s[0:3], s[3:6], s[6], method="slsqp", exact_gradients=True)
+    assert fast.success
+    assert fast.cost == pytest.approx(ref.cost, rel=5e-3)
+
+
+@pytest.mark.parametrize("case", [0, 7, 32])
+def test_fuel_optimal_burns_no_more_than_energy_optimal(case: int) -> None:
+    s = CASES[case]
+    e = ocp.solve(s[0:3], s[3:6], s[6], objective="energy")
+    f = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel")
+    assert f.success, f.message
+    assert f.fuel <= e.fuel + 1e-6
+
+
+@pytest.mark.slow
+def test_fuel_optimal_on_every_case(qp_results: list[ocp.OCPResult]) -> None:
+    for s, e in zip(CASES, qp_results, strict=True):
+        f = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel")
+        assert f.success and f.fuel <= e.fuel + 1e-6
+
+
+@pytest.mark.parametrize(
+    ("pos", "vel", "mass", "words"),
+    [
+        ([np.nan, 0, 2500], [0, 0, -80], 2000, "NaN"),
+        ([0, 0, 2500], [0, np.inf, -80], 2000, "NaN or infinite"),
+        ([0, 0, 2500], [0, 0, -80], 0.0, "mass"),
+        ([0, 0, 2500], [0, 0, -80], -5.0, "mass"),
+        ([0, 0, 0.0], [0, 0, -80], 2000, "altitude"),
+        ([0, 0, -10.0], [0, 0, -80], 2000, "altitude"),
+        ([0, 0, 5e5], [0, 0, -80], 2000, "absurd"),
+        ([0, 0, 2500], [0, 0, -5e3], 2000, "absurd"),
+        ([0, 0, 2500], [0, 0, -80], 900.0, "dry mass"),
+        ([0, 2500], [0, 0, -80], 2000, "3 position"),
+    ],
+)
+def test_bad_requests_fail_with_a_message(pos: list, vel: list, mass: float, words: str) -> None:
+    r = ocp.solve(pos, vel, mass)
+    assert not r.success
+    assert words.lower() in r.message.lower()
+    assert ocp.check_request(pos, vel, mass) is not None
+
+
+def test_bad_options_fail_with_a_message() -> None:
+    s = CASES[0]
+    assert "unknown method" in ocp.solve(s[0:3], s[3:6], s[6], method="nope").message
+    assert "unknown objective" in ocp.solve(s[0:3], s[3:6], s[6], objective="x").message
+    assert "n_control" in ocp.solve(s[0:3], s[3:6], s[6], n_control=1).message
+    assert ocp.check_request(s[0:3], s[3:6], s[6]) is None
