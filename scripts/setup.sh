@@ -49,6 +49,13 @@ quiet_pip() {
 
 hash_stdin() { sha256sum | cut -d' ' -f1; }
 
+# One setup at a time (two colcon builds or pip runs in the same tree would trample each other).
+exec 9>"$ROOT/.pd_setup.lock"
+if ! flock -n 9; then
+    log "another setup is running here; waiting for it"
+    flock 9
+fi
+
 # --------------------------------------------------------------------------- relock
 if [[ $RELOCK == 1 ]]; then
     tmp="$(mktemp -d)"
@@ -150,8 +157,10 @@ mkdir -p "$WS/src"
 for link in "$WS"/src/*; do
     # Drop links whose package left the root (or stopped being one).
     if [[ -L $link && ! -f $link/package.xml ]]; then
-        log "removing stale link ${link#"$ROOT"/}"
+        stale="$(basename "$link")"
+        log "removing stale link ros2_ws/src/$stale and its build/install folders"
         rm -f "$link"
+        rm -rf "${WS:?}/build/$stale" "${WS:?}/install/$stale"
     fi
 done
 packages=()
@@ -214,6 +223,10 @@ if [[ $FORCE == 1 || ! -f $BUILD_STAMP || "$(cat "$BUILD_STAMP")" != "$build_has
             --parallel-workers "$(nproc)" \
             --event-handlers console_cohesion- summary+ desktop_notification- \
             --cmake-args -DPython3_EXECUTABLE="$PY" -DCMAKE_BUILD_TYPE=Release
+        # A package.xml that catkin_pkg cannot parse makes colcon fall back to a plain `python`
+        # package: it builds, but gets no ament index entry and `ros2 run` cannot find it.
+        colcon list --base-paths src | awk '$3 !~ /^\(ros\./ {
+            print "[setup] warning: " $1 " is built as " $3 ", not as a ROS package: check its package.xml" }'
     )
     touch "$WS/build/.pd_symlink_install"
     echo "$build_hash" >"$BUILD_STAMP"

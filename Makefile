@@ -1,0 +1,61 @@
+# Entry points of the project. `make demo` and `make test` run `make setup` first (cheap when
+# nothing changed: it skips pip and colcon by stamp). Every command runs inside the environment
+# through $(IN_ENV), which sources env.sh.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+IN_ENV := scripts/in_env.sh
+PYTEST_ARGS ?=
+ARGS ?=
+
+.PHONY: help setup test lint pytest demo train bench clean distclean
+
+help:
+	@echo "make setup      build .venv and ros2_ws (idempotent; skips work by stamp)"
+	@echo "make demo       fly the lander (FAST=1 for the short version)"
+	@echo "make test       ruff check + ruff format --check + pytest tests/  (PYTEST_ARGS=...)"
+	@echo "make train      pd-train \$$(ARGS)"
+	@echo "make bench      run every bench/*.py"
+	@echo "make clean      remove ros2_ws build/install/log and caches (distclean: also .venv)"
+
+setup:
+	scripts/setup.sh
+
+lint: setup
+	$(IN_ENV) ruff check .
+	$(IN_ENV) ruff format --check .
+
+pytest: setup
+	$(IN_ENV) pytest $(PYTEST_ARGS)
+
+# pytest exits 5 when it collects no test: that fails `make test` too.
+test: setup
+	$(IN_ENV) ruff check .
+	$(IN_ENV) ruff format --check .
+	$(IN_ENV) pytest $(PYTEST_ARGS)
+
+# Placeholder until the demo orchestrator lands; then this becomes:
+#	$(IN_ENV) pd-demo $(if $(FAST),--fast)
+demo: setup
+	@if $(IN_ENV) python -c 'import importlib.util as u, sys; sys.exit(0 if u.find_spec("pd_core.cli") and u.find_spec("pd_core.cli.demo_offline") else 1)' 2>/dev/null; then \
+		$(IN_ENV) python -m pd_core.cli.demo_offline $(if $(FAST),--fast); \
+	else \
+		echo "make demo: no demo yet (pd_core.cli.demo_offline is not written)" >&2; exit 1; \
+	fi
+
+train: setup
+	$(IN_ENV) pd-train $(ARGS)
+
+bench: setup
+	@shopt -s nullglob; files=(bench/*.py); \
+	if [ $${#files[@]} -eq 0 ]; then echo "make bench: no bench/*.py yet"; exit 0; fi; \
+	for f in "$${files[@]}"; do \
+		echo "=== $$f"; $(IN_ENV) python "$$f" || exit 1; \
+	done
+
+clean:
+	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log .pytest_cache .ruff_cache
+	find . -path ./.venv -prune -o -type d -name __pycache__ -prune -exec rm -rf {} +
+
+distclean: clean
+	rm -rf .venv ros2_ws/src

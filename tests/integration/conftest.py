@@ -1,0 +1,132 @@
+"""Fixtures for tests that talk over ROS 2 / DDS.
+
+ROS domain
+----------
+At import (before any ``rclpy.init``) this conftest claims a ROS domain id that no other pytest
+session on this machine holds, and exports it as ``ROS_DOMAIN_ID``: the test process and every
+node process it starts (they inherit ``os.environ``) share that domain, and two test runs at the
+same time (or a demo on the default domain 0) never hear each other. A domain is claimed by an
+exclusive ``flock`` on ``$TMPDIR/pd_ros_domains/<id>.lock`` held until the session ends; ids run
+1..101 (0 is everyone's default; above 101 FastDDS ports meet Linux's ephemeral range).
+Set ``PD_TEST_ROS_DOMAIN_ID=<id>`` to force one (for example to watch a test from another shell).
+
+Discovery is kept on loopback (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) and FastDDS is the
+RMW, also when pytest is run without ``source env.sh`` (rclpy must still be importable then).
+
+Fixtures
+--------
+``ros_context``  a fresh ``rclpy.Context``, initialised, shut down after the test;
+``ros_executor`` a ``SingleThreadedExecutor`` on that context;
+``make_node``    ``make_node(name, **kw)`` makes a ``Node`` on the context, adds it to the executor
+                 and destroys it after the test;
+``spin_until``   ``spin_until(predicate, timeout_sec=10.0) -> bool`` spins the executor with
+                 ``spin_once`` steps until ``predicate()`` holds or the deadline passes
+                 (never a bare ``spin``).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+_DOMAIN_MIN, _DOMAIN_MAX = 1, 101
+
+
+def _claim_domain_id() -> tuple[int, int | None]:
+    """Return (domain id, fd of the held lock); the lock lives as long as this process."""
+    forced = os.environ.get("PD_TEST_ROS_DOMAIN_ID")
+    if forced:
+        return int(forced), None
+    lock_dir = Path(tempfile.gettempdir()) / "pd_ros_domains"
+    lock_dir.mkdir(mode=0o777, exist_ok=True)
+    span = _DOMAIN_MAX - _DOMAIN_MIN + 1
+    start = os.getpid() % span
+    for i in range(span):
+        domain = _DOMAIN_MIN + (start + i) % span
+        fd = os.open(lock_dir / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        return domain, fd
+    raise RuntimeError(
+        f"no free ROS domain id in {_DOMAIN_MIN}..{_DOMAIN_MAX} (locks in {lock_dir})"
+    )
+
+
+ROS_DOMAIN_ID, _domain_lock_fd = _claim_domain_id()
+os.environ["ROS_DOMAIN_ID"] = str(ROS_DOMAIN_ID)
+os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+# After the environment is settled: rclpy reads it when a context is initialised.
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    return f"ROS_DOMAIN_ID={ROS_DOMAIN_ID} RMW_IMPLEMENTATION={os.environ['RMW_IMPLEMENTATION']}"
+
+
+@pytest.fixture
+def ros_context() -> Iterator[Context]:
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
+
+
+@pytest.fixture
+def ros_executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
+    executor = SingleThreadedExecutor(context=ros_context)
+    try:
+        yield executor
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+
+
+@pytest.fixture
+def make_node(
+    ros_context: Context, ros_executor: SingleThreadedExecutor
+) -> Iterator[Callable[..., Node]]:
+    nodes: list[Node] = []
+
+    def factory(name: str, **kwargs) -> Node:
+        node = Node(name, context=ros_context, **kwargs)
+        nodes.append(node)
+        ros_executor.add_node(node)
+        return node
+
+    try:
+        yield factory
+    finally:
+        for node in reversed(nodes):
+            ros_executor.remove_node(node)
+            node.destroy_node()
+
+
+@pytest.fixture
+def spin_until(ros_executor: SingleThreadedExecutor) -> Callable[..., bool]:
+    def spin(
+        predicate: Callable[[], bool], timeout_sec: float = 10.0, step_sec: float = 0.05
+    ) -> bool:
+        deadline = time.monotonic() + timeout_sec
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            ros_executor.spin_once(timeout_sec=step_sec)
+        return bool(predicate())
+
+    return spin
