@@ -147,7 +147,7 @@ def _demos(args: argparse.Namespace) -> int:
         "initial_states": "Table 1 (33 cases)"
         + (f" + {args.extra} uniform Table 3" if args.extra else ""),
         "seed": args.seed,
-        "hindsight": "ocp_time",
+        "hindsight": disc.DEFAULT_HINDSIGHT,
         "n_episodes": len(all_runs),
         "n_landed": int(sum(r.landed for r in all_runs)),
     }
