@@ -34,14 +34,10 @@ test: setup
 	$(IN_ENV) ruff format --check .
 	$(IN_ENV) pytest $(PYTEST_ARGS)
 
-# Placeholder until the demo orchestrator lands; then this becomes:
-#	$(IN_ENV) pd-demo $(if $(FAST),--fast)
+# The main job: the three nodes and a recorder as separate processes over DDS, one landing at the
+# real 5 Hz (FAST=1: in lockstep), a bag and a PNG under out/. ros2_run.sh sources env.sh itself.
 demo: setup
-	@if $(IN_ENV) python -c 'import importlib.util as u, sys; sys.exit(0 if u.find_spec("pd_core.cli") and u.find_spec("pd_core.cli.demo_offline") else 1)' 2>/dev/null; then \
-		$(IN_ENV) python -m pd_core.cli.demo_offline $(if $(FAST),--fast); \
-	else \
-		echo "make demo: no demo yet (pd_core.cli.demo_offline is not written)" >&2; exit 1; \
-	fi
+	scripts/ros2_run.sh pd_bringup pd_demo $(if $(FAST),--fast) $(ARGS)
 
 train: setup
 	$(IN_ENV) pd-train $(ARGS)

@@ -34,6 +34,12 @@ case $- in *u*) _pd_had_u=1; set +u ;; *) _pd_had_u= ;; esac
 . "$_pd_root/ros2_ws/install/setup.bash"
 [ -n "$_pd_had_u" ] && set -u
 
+# The nodes' ament_python entry points (what `ros2 run` would find) on PATH, so
+# `pd_sim_node --ros-args ...` works here without the ros2 CLI.
+for _pd_d in "$_pd_root"/ros2_ws/install/pd_*/lib/pd_*; do
+    [ -d "$_pd_d" ] && _pd_prepend PATH "$_pd_d"
+done
+unset _pd_d
 export PD_ROOT="$_pd_root"
 # One BLAS/OpenMP thread per process: on 2 cores shared by several nodes and tests, threaded BLAS
 # makes the OCP's small products ~100x slower; torch in pd-train sets its own thread count.

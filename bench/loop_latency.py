@@ -1,0 +1,203 @@
+"""Loop latency over DDS and the simulator's period jitter (not part of `make test`).
+
+1. Latency: this process plays the simulator (pd_core.sim.Simulator, closed loop) and publishes
+   /lander/state; a real pd_policy_node process answers on /lander/thrust_cmd. Measured: time from
+   just before `publish(state)` to the command's arrival in our callback, over --steps steps (one
+   at a time, ping-pong). Target p99 < 5 ms.
+2. Jitter: a real pd_sim_node at 5 Hz (auto_restart, no policy); measured: |inter-arrival - 200 ms|
+   of /lander/state at a subscriber over --jitter-s seconds (this includes DDS delivery and our
+   own wake-up, so it bounds the simulator's own timer jitter from above). Target p99 < 2 ms.
+
+    scripts/in_env.sh python bench/loop_latency.py [--steps 1000] [--jitter-s 60] [--model PATH]
+
+Prints figures and a JSON line; exits 0 whether or not targets are met (it reports, CI does not
+gate on it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def parse_args() -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--steps", type=int, default=1000, help="latency samples (steps)")
+    p.add_argument("--jitter-s", type=float, default=60.0, help="seconds of 5 Hz states to time")
+    p.add_argument("--model", default="", help="policy file (default: shipped, else untrained)")
+    p.add_argument(
+        "--tick-priority", type=int, default=0, help="pd_sim_node tick_priority (SCHED_FIFO)"
+    )
+    return p.parse_args()
+
+
+def model_path(arg: str, tmp: Path) -> tuple[str, str]:
+    if arg:
+        return arg, "given"
+    from pd_policy_node.node import default_model_path
+
+    shipped = default_model_path()
+    if shipped.is_file():
+        return str(shipped), "shipped"
+    import torch
+
+    from pd_core.dqn.network import QNetwork
+    from pd_core.policy import save_policy
+
+    torch.manual_seed(0)
+    return str(save_policy(tmp / "untrained.pt", QNetwork())), "untrained (no shipped model yet)"
+
+
+def main() -> int:
+    args = parse_args()
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from pd_bringup.demo import Child, claim_domain_id, executable
+    from pd_core.sim import Command, Simulator, percentiles_ms
+    from pd_interfaces.msg import LanderState, ThrustCommand
+    from pd_policy_node.node import LOOP_QOS
+    from pd_sim_node.convert import state_msg
+
+    tmp = Path(tempfile.mkdtemp(prefix="pd_bench_"))
+    domain, _lock = claim_domain_id()
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1"}
+    model, model_kind = model_path(args.model, tmp)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = Node("pd_bench", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    children: list[Child] = []
+    report: dict = {"model": model_kind, "cpu_count": os.cpu_count()}
+    try:
+        # ------------------------------------------------------------ 1. latency
+        pol = Child(
+            "pd_policy_node",
+            [
+                executable("pd_policy_node", "pd_policy_node"),
+                "--ros-args",
+                "-p",
+                f"model_path:={model}",
+                "-p",
+                "stats_period_s:=0.0",
+            ],
+            tmp,
+            env,
+        )
+        children.append(pol)
+        got: list[tuple[float, ThrustCommand]] = []
+        node.create_subscription(
+            ThrustCommand,
+            "/lander/thrust_cmd",
+            lambda m: got.append((time.perf_counter(), m)),
+            LOOP_QOS,
+        )
+        pub = node.create_publisher(LanderState, "/lander/state", LOOP_QOS)
+        deadline = time.monotonic() + 60
+        while pub.get_subscription_count() < 1 or node.count_publishers("/lander/thrust_cmd") < 1:
+            if time.monotonic() > deadline or not pol.alive():
+                print(f"policy node did not come up:\n{pol.tail()}", file=sys.stderr)
+                return 1
+            ex.spin_once(timeout_sec=0.05)
+        time.sleep(0.5)
+        sim = Simulator(seed=0)
+        sim.reset()
+        lat: list[float] = []
+        lost = 0
+        for i in range(args.steps + 20):  # 20 warm-up steps, not counted
+            if not sim.flying:
+                sim.reset()
+            msg = state_msg(sim.episode, sim.step, sim.time_s, sim.state, sim.status)
+            got.clear()
+            t0 = time.perf_counter()
+            pub.publish(msg)
+            end = t0 + 1.0
+            while not got and time.perf_counter() < end:
+                ex.spin_once(timeout_sec=0.1)
+            if not got:
+                lost += 1
+                sim.advance()
+                continue
+            t1, cmd = got[0]
+            if i >= 20:
+                lat.append(t1 - t0)
+            t = cmd.thrust
+            sim.submit(Command(cmd.episode, cmd.step, cmd.action, (t.x, t.y, t.z)))
+            sim.advance()
+            time.sleep(0.002)
+        q = percentiles_ms(lat)
+        report["latency_ms"] = {**q, "lost": lost}
+        print(
+            f"state published -> command received over DDS ({model_kind} model), "
+            f"{q['n']} steps: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, max {q['max']:.3f} ms"
+            f"  [target p99 < 5 ms: {'met' if q['p99'] < 5 else 'NOT met'}]; lost {lost}",
+            flush=True,
+        )
+        pol.stop()
+
+        # ------------------------------------------------------------ 2. jitter at 5 Hz
+        if args.jitter_s > 0:
+            arrivals: list[float] = []
+            node.create_subscription(
+                LanderState,
+                "/lander/state",
+                lambda m: arrivals.append(time.monotonic()),
+                LOOP_QOS,
+            )
+            simp = Child(
+                "pd_sim_node",
+                [
+                    executable("pd_sim_node", "pd_sim_node"),
+                    "--ros-args",
+                    "-p",
+                    "auto_restart:=true",
+                ],
+                tmp,
+                env,
+            )
+            children.append(simp)
+            deadline = time.monotonic() + 60
+            while len(arrivals) < 3:
+                if time.monotonic() > deadline or not simp.alive():
+                    print(f"simulator did not come up:\n{simp.tail()}", file=sys.stderr)
+                    return 1
+                ex.spin_once(timeout_sec=0.05)
+            arrivals.clear()
+            end = time.monotonic() + args.jitter_s
+            while time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.05)
+            periods = np.diff(arrivals)
+            dev = np.abs(periods - 0.2)
+            q = percentiles_ms(dev)
+            rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
+            report["jitter_ms"] = {**q, "rate_hz": rate, "tick_priority": args.tick_priority}
+            print(
+                f"simulator period jitter at 5 Hz (|period - 200 ms| at a subscriber), "
+                f"{q['n']} periods: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, "
+                f"max {q['max']:.3f} ms; mean rate {rate:.4f} Hz"
+                f"  [target p99 < 2 ms: {'met' if q['p99'] < 2 else 'NOT met'}]",
+                flush=True,
+            )
+        print(json.dumps(report))
+    finally:
+        for c in children:
+            c.stop()
+        ex.remove_node(node)
+        node.destroy_node()
+        ex.shutdown(timeout_sec=1.0)
+        ctx.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""pd_bringup: launch, parameters, the demo orchestrator, bag record and replay."""

@@ -1,0 +1,124 @@
+"""pd_replay: publish a bag's messages with their recorded timing (or `--rate` times faster).
+
+    pd_replay bags/run1
+    pd_replay bags/run1 --topics /lander/state --rate 10
+    pd_replay bags/run1 --topics /lander/state --remap /lander/state:=/replay/state \
+        --wait-subscribers 1
+
+The raw CDR bytes of the bag are published unchanged (RELIABLE, KEEP_LAST, VOLATILE, like the
+stack's publishers). `--wait-subscribers N` holds the first message until every replayed topic
+has N subscribers (with `--wait-timeout`), so nothing is published into the void.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import Reader
+
+from pd_bringup.bag import message_class, read_messages
+
+REPLAY_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
+    p = argparse.ArgumentParser(prog="pd_replay", description=__doc__.split("\n\n")[0])
+    p.add_argument("bag", type=Path, help="bag folder (rosbag2, MCAP or SQLite3)")
+    p.add_argument("--topics", nargs="+", default=None, help="only these topics (default all)")
+    p.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1.0)")
+    p.add_argument(
+        "--remap",
+        action="append",
+        default=[],
+        metavar="FROM:=TO",
+        help="publish topic FROM under the name TO (repeatable)",
+    )
+    p.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until each topic has N subscribers before the first message",
+    )
+    p.add_argument("--wait-timeout", type=float, default=30.0, help="seconds for that wait")
+    return p.parse_known_args(argv)
+
+
+class Replayer(Node):
+    def __init__(self) -> None:
+        super().__init__("pd_replay")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
+    if not args.rate > 0:
+        print(f"pd_replay: --rate must be > 0, got {args.rate}", file=sys.stderr)
+        return 2
+    remap = {}
+    for r in args.remap:
+        src, sep, dst = r.partition(":=")
+        if not sep or not src or not dst:
+            print(f"pd_replay: --remap wants FROM:=TO, got {r!r}", file=sys.stderr)
+            return 2
+        remap[src] = dst
+    with Reader(args.bag) as reader:
+        types = {
+            c.topic: c.msgtype
+            for c in reader.connections
+            if args.topics is None or c.topic in args.topics
+        }
+    if not types:
+        print(f"pd_replay: no matching topics in {args.bag}", file=sys.stderr)
+        return 2
+
+    rclpy.init(args=["pd_replay", *ros_args])
+    node = Replayer()
+    sent = 0
+    try:
+        pubs = {
+            t: node.create_publisher(message_class(m), remap.get(t, t), REPLAY_QOS)
+            for t, m in types.items()
+        }
+        if args.wait_subscribers > 0:
+            deadline = time.monotonic() + args.wait_timeout
+            while any(p.get_subscription_count() < args.wait_subscribers for p in pubs.values()):
+                if time.monotonic() > deadline:
+                    print("pd_replay: subscribers did not appear in time", file=sys.stderr)
+                    return 1
+                time.sleep(0.05)
+        t0_wall = time.monotonic()
+        t0_bag = None
+        for topic, _, stamp, raw in read_messages(args.bag, list(types)):
+            if t0_bag is None:
+                t0_bag = stamp
+            delay = t0_wall + (stamp - t0_bag) * 1e-9 / args.rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            pubs[topic].publish(bytes(raw))
+            sent += 1
+        for p in pubs.values():
+            p.wait_for_all_acked(Duration(seconds=5))
+        print(f"pd_replay: published {sent} messages from {args.bag}", flush=True)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        print(f"pd_replay: interrupted after {sent} messages", flush=True)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,387 @@
+"""Episode bookkeeping and command validation for the simulator node (no rclpy).
+
+`Simulator` wraps `PoweredDescentEnv` the way pd_sim_node drives it: episodes are numbered from 1,
+each step waits for a thrust command that names the episode and step it answers, and a command is
+applied only if it is valid for the step being flown. Anything else is rejected with a reason,
+counted, and never applied. When a step has to be flown without a fresh command, the last applied
+command is held (`missing_command="hold"`) or zero thrust is used (`"zero"`).
+
+Flying the same seed, initial state and actions through `Simulator` and through
+`PoweredDescentEnv` gives bit-identical states: `Simulator.advance` calls `env.step(action)`.
+
+`FixedRateTicker` is the wall-clock timer of the real-time mode: absolute deadlines on the
+monotonic clock (no drift), missed periods are skipped, lateness is recorded for jitter figures.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
+from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, StateRange
+from pd_core.env import PoweredDescentEnv, Status
+from pd_core.state import check_state
+
+MISSING_COMMAND_MODES = ("hold", "zero")
+
+# A command's thrust must equal the table thrust of its action to this tolerance (N). The policy
+# sends the table value itself, so anything beyond rounding is a sender bug or a tampered message.
+THRUST_MATCH_TOL_N = 1e-6
+
+
+@dataclass(frozen=True)
+class Command:
+    """A thrust command as received: the (episode, step) it answers, its action and thrust (N)."""
+
+    episode: int
+    step: int
+    action: int
+    thrust_n: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What one `Simulator.advance` did."""
+
+    action: int | None  # the action flown; None for zero thrust with no action
+    thrust_n: tuple[float, float, float]
+    fresh: bool  # a command answering this step was applied (not held / zero)
+    status: Status
+    done: bool  # the episode ended with this step
+    result: dict[str, Any] | None  # episode result when done
+
+
+@dataclass
+class Counters:
+    """Totals over the simulator's life (all episodes)."""
+
+    steps: int = 0
+    episodes_started: int = 0
+    episodes_finished: int = 0
+    accepted_commands: int = 0
+    rejected_commands: int = 0
+    missed_commands: int = 0
+    rejected_by_reason: dict[str, int] = field(default_factory=dict)
+
+
+def check_command(
+    cmd: Command,
+    episode: int | None,
+    step: int | None,
+    actions: ActionSpace = DEFAULT_ACTIONS,
+    thrust_tol_n: float = THRUST_MATCH_TOL_N,
+) -> tuple[str, str] | None:
+    """None if `cmd` may be applied at (episode, step), else (kind, message) saying why not.
+
+    kinds: "action" (unknown action), "thrust" (NaN/infinite or not the action's thrust),
+    "stale" (answers an earlier step or episode), "ahead" (answers a step not flown yet),
+    "idle" (no episode is running). Content is checked before timing, so a malformed command
+    is reported as malformed even when it is also late.
+    """
+    a = cmd.action
+    if isinstance(a, bool) or not isinstance(a, (int, np.integer)) or not 0 <= a < actions.n:
+        return "action", f"unknown action {a!r}: valid actions are 0..{actions.n - 1}"
+    t = np.asarray(cmd.thrust_n, dtype=float)
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        return "thrust", f"thrust has NaN or infinite values: {t.tolist()}"
+    expected = actions.table_n[int(a)]
+    if np.max(np.abs(t - expected)) > thrust_tol_n:
+        return "thrust", (
+            f"thrust {t.tolist()} N does not match action {int(a)} ({expected.tolist()} N)"
+        )
+    if episode is None or step is None:
+        return "idle", f"no episode is running (command for episode {cmd.episode} step {cmd.step})"
+    if (cmd.episode, cmd.step) < (episode, step):
+        return "stale", (
+            f"stale command for episode {cmd.episode} step {cmd.step}; "
+            f"the simulator is at episode {episode} step {step}"
+        )
+    if (cmd.episode, cmd.step) > (episode, step):
+        return "ahead", (
+            f"command for episode {cmd.episode} step {cmd.step} is ahead of the simulator "
+            f"(episode {episode} step {step})"
+        )
+    return None
+
+
+def describe_end(status: Status, state: np.ndarray, time_s: float) -> str:
+    """Human-readable reason an episode ended (Eq. 12 landing condition)."""
+    pos, vel = state[0:3], state[3:6]
+    r, v = float(np.linalg.norm(pos)), float(np.linalg.norm(vel))
+    lim = f"(limits |r| < {REWARD.x_lim_m:g} m, |v| < {REWARD.v_lim_mps:g} m/s)"
+    if status == Status.LANDED:
+        return f"landed: touchdown at |r| = {r:.3f} m, |v| = {v:.3f} m/s {lim}"
+    if status == Status.CRASHED:
+        why = []
+        if r >= REWARD.x_lim_m:
+            why.append(f"|r| = {r:.2f} m off target")
+        if v >= REWARD.v_lim_mps:
+            why.append(f"|v| = {v:.2f} m/s too fast")
+        return f"crashed: touchdown with {' and '.join(why) or 'no margin'} {lim}"
+    if status == Status.OUT_OF_TIME:
+        return f"out of time: still flying at {time_s:.1f} s, altitude {float(pos[2]):.1f} m"
+    return f"interrupted at {time_s:.1f} s (altitude {float(pos[2]):.1f} m) by a reset"
+
+
+class Simulator:
+    """PoweredDescentEnv plus episode numbering, command validation and counters.
+
+    Typical loop: `reset()`; then per step `submit(cmd)` for every command received and
+    `advance()` once per period (real time) or once `has_fresh_command` (lockstep).
+    Not thread-safe: the node serialises calls with a lock.
+    """
+
+    def __init__(
+        self,
+        disturbance: bool = True,
+        missing_command: str = "hold",
+        max_time_s: float = MAX_EPISODE_TIME_S,
+        initial_range: StateRange = TABLE3,
+        actions: ActionSpace = DEFAULT_ACTIONS,
+        dt_s: float = DT_S,
+        seed: int | None = None,
+    ) -> None:
+        if missing_command not in MISSING_COMMAND_MODES:
+            raise ValueError(
+                f"missing_command must be one of {MISSING_COMMAND_MODES}, got {missing_command!r}"
+            )
+        if not (math.isfinite(max_time_s) and max_time_s >= dt_s):
+            raise ValueError(f"max_time_s must be >= dt ({dt_s} s), got {max_time_s!r}")
+        self.env = PoweredDescentEnv(
+            disturbance=disturbance,
+            max_time_s=max_time_s,
+            initial_range=initial_range,
+            actions=actions,
+            dt_s=dt_s,
+        )
+        self.actions = actions
+        self.missing_command = missing_command
+        self.counters = Counters()
+        self.episode = 0  # number of the current (or last) episode; 0 before the first
+        self.flying = False
+        self._next_seed = seed  # used by the first reset that names no seed
+        self._pending: Command | None = None
+        self._last_action: int | None = None
+        self._status = Status.FLYING
+        self._initial = np.zeros(7)
+        self._ep_rejected = 0
+        self._ep_missed = 0
+        self._last_result: dict[str, Any] | None = None
+
+    # ------------------------------------------------------------------ episode control
+    @property
+    def step(self) -> int:
+        """Index of the step being flown (the state published last has this index)."""
+        return self.env._steps
+
+    @property
+    def state(self) -> np.ndarray:
+        return self.env.state
+
+    @property
+    def status(self) -> Status:
+        return self._status
+
+    @property
+    def time_s(self) -> float:
+        return self.env.time_s
+
+    @property
+    def last_result(self) -> dict[str, Any] | None:
+        return self._last_result
+
+    def reset(
+        self, initial_state: np.ndarray | None = None, seed: int | None = None
+    ) -> tuple[int, np.ndarray, dict[str, Any] | None]:
+        """Start a new episode; (episode, initial state, result of an interrupted episode).
+
+        `seed` None keeps the RNG running (the constructor's seed applies to the first reset);
+        `initial_state` None samples the initial range (Table 3). ValueError for a bad state
+        (the running episode then goes on untouched).
+        """
+        if initial_state is not None:
+            initial_state = check_state(initial_state).reshape(7)
+        if seed is not None and seed < 0:
+            raise ValueError(f"seed must be >= 0 or None, got {seed}")
+        interrupted = self._finish(Status.FLYING) if self.flying else None
+        if seed is None and self._next_seed is not None:
+            seed = self._next_seed
+        self._next_seed = None
+        opts = {"initial_state": initial_state} if initial_state is not None else None
+        _, info = self.env.reset(seed=seed, options=opts)
+        self.episode += 1
+        self.flying = True
+        self._status = Status.FLYING
+        self._initial = np.asarray(info["state"], dtype=float).copy()
+        self._pending = None
+        self._last_action = None
+        self._ep_rejected = 0
+        self._ep_missed = 0
+        self.counters.episodes_started += 1
+        return self.episode, self._initial.copy(), interrupted
+
+    # ------------------------------------------------------------------ commands
+    def submit(self, cmd: Command) -> tuple[str, str] | None:
+        """Validate and store a command for the current step; None or (kind, reason) if rejected."""
+        where = (self.episode, self.step) if self.flying else (None, None)
+        err = check_command(cmd, *where, actions=self.actions)
+        if err is not None:
+            self.counters.rejected_commands += 1
+            by = self.counters.rejected_by_reason
+            by[err[0]] = by.get(err[0], 0) + 1
+            if self.flying:
+                self._ep_rejected += 1
+            return err
+        self._pending = cmd  # the latest valid command for this step wins
+        self.counters.accepted_commands += 1
+        return None
+
+    @property
+    def has_fresh_command(self) -> bool:
+        """A valid command answering the current step has arrived (lockstep may advance)."""
+        p = self._pending
+        return self.flying and p is not None and (p.episode, p.step) == (self.episode, self.step)
+
+    # ------------------------------------------------------------------ stepping
+    def advance(self) -> StepOutcome:
+        """Fly one step with the fresh command, else the held one or zero thrust."""
+        if not self.flying:
+            raise RuntimeError("no episode is running: call reset() first")
+        fresh = self.has_fresh_command
+        action: int | None
+        if fresh:
+            assert self._pending is not None
+            action = int(self._pending.action)
+        else:
+            action = self._last_action if self.missing_command == "hold" else None
+            self._ep_missed += 1
+            self.counters.missed_commands += 1
+        self._pending = None
+        if action is None:
+            thrust = (0.0, 0.0, 0.0)
+            _, _, terminated, truncated, info = self.env.step_thrust(thrust)
+        else:
+            thrust = tuple(float(v) for v in self.actions.table_n[action])
+            _, _, terminated, truncated, info = self.env.step(action)
+            self._last_action = action
+        self.counters.steps += 1
+        self._status = Status(info["status"])
+        result = None
+        done = bool(terminated or truncated)
+        if done:
+            result = self._finish(self._status)
+        return StepOutcome(action, thrust, fresh, self._status, done, result)
+
+    def _finish(self, status: Status) -> dict[str, Any]:
+        s = self.env.state
+        result = {
+            "episode": self.episode,
+            "steps": self.step,
+            "time_of_flight": self.time_s,
+            "initial_position": self._initial[0:3].copy(),
+            "initial_velocity": self._initial[3:6].copy(),
+            "final_position": s[0:3].copy(),
+            "final_velocity": s[3:6].copy(),
+            "final_mass": float(s[6]),
+            "fuel": float(self._initial[6] - s[6]),
+            "landed": status == Status.LANDED,
+            "status": int(status),
+            "reason": describe_end(status, s, self.time_s),
+            "rejected_commands": self._ep_rejected,
+            "missed_commands": self._ep_missed,
+        }
+        self.flying = False
+        self._pending = None
+        self.counters.episodes_finished += 1
+        self._last_result = result
+        return result
+
+
+class FixedRateTicker:
+    """Calls `fn()` every `period_s` on a thread, at absolute monotonic deadlines (no drift).
+
+    A call that overruns skips the deadlines it missed (counted in `skipped`) instead of
+    bursting. `lateness_s` keeps how late each call started (the wake-up jitter).
+    """
+
+    def __init__(
+        self,
+        period_s: float,
+        fn: Callable[[], None],
+        name: str = "ticker",
+        keep: int = 10000,
+        priority: int = 0,
+    ) -> None:
+        if not (math.isfinite(period_s) and period_s > 0):
+            raise ValueError(f"period must be positive and finite, got {period_s!r}")
+        self.period_s = period_s
+        self._fn = fn
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._keep = keep
+        self.lateness_s: list[float] = []
+        self.skipped = 0
+        self.error: BaseException | None = None
+        # > 0: run the ticker thread under SCHED_FIFO at this priority (Linux; needs
+        # CAP_SYS_NICE). Wake-ups then do not wait behind other busy processes.
+        self.priority = priority
+        self.priority_error: str | None = None
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, join: bool = True, timeout_s: float = 2.0) -> None:
+        """Stop ticking; `join=False` only asks (safe under a lock that `fn` takes)."""
+        self._stop.set()
+        if join and self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout_s)
+
+    def _run(self) -> None:
+        if self.priority > 0:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
+            except (AttributeError, OSError) as exc:
+                self.priority_error = f"SCHED_FIFO {self.priority} refused: {exc}"
+        deadline = time.monotonic() + self.period_s
+        while not self._stop.is_set():
+            delay = deadline - time.monotonic()
+            if delay > 0:
+                # time.sleep uses clock_nanosleep on Linux; Event.wait would add its own slack.
+                time.sleep(delay)
+                if self._stop.is_set():
+                    break
+            now = time.monotonic()
+            self.lateness_s.append(now - deadline)
+            if len(self.lateness_s) > self._keep:
+                del self.lateness_s[: len(self.lateness_s) - self._keep]
+            try:
+                self._fn()
+            except BaseException as exc:  # keep the error for the owner; stop ticking
+                self.error = exc
+                return
+            deadline += self.period_s
+            now = time.monotonic()
+            if now > deadline:
+                missed = math.floor((now - deadline) / self.period_s) + 1
+                self.skipped += missed
+                deadline += missed * self.period_s
+
+
+def percentiles_ms(samples_s: list[float] | np.ndarray, qs: tuple[float, ...] = (50, 99)) -> dict:
+    """{"n", "p50", "p99", "max"} of samples in seconds, reported in milliseconds."""
+    a = np.asarray(samples_s, dtype=float) * 1e3
+    if a.size == 0:
+        return {"n": 0, **{f"p{q:g}": math.nan for q in qs}, "max": math.nan}
+    out: dict[str, float] = {"n": int(a.size)}
+    for q in qs:
+        out[f"p{q:g}"] = float(np.percentile(a, q))
+    out["max"] = float(a.max())
+    return out

@@ -1,0 +1,298 @@
+"""pd_ocp_node: serves /ocp/compute_trajectory (pd_interfaces/srv/ComputeTrajectory).
+
+The request callback runs on a worker thread of a MultiThreadedExecutor in a
+ReentrantCallbackGroup, and the solve itself (`pd_core.ocp.solve`, which never raises) runs in a
+solver process (a one-worker spawn-context process pool), so neither the solver's CPU time nor its
+hold on the GIL keeps the node from answering parameter queries and other requests while it works;
+a solver process that crashes or overruns its time limit is replaced and the request answered
+with success=false. At most `max_pending` requests are in the node at once (one
+solving, the rest waiting their turn); more are answered at once with success=false ("busy"), so
+executor threads are always left for parameter services. Bad requests (NaN/inf, mass <= dry mass,
+altitude <= 0, absurd magnitudes, unknown method/objective) and solver failures or timeouts get
+success=false with the reason; nothing a request holds can kill the node.
+
+Parameters are listed in PARAMETERS below (defaults in pd_bringup/config/ocp.yaml); method,
+objective, control_points and timeout_s may be changed at run time (validated) and apply to the
+next request that leaves the field empty or zero.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import sys
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Vector3
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from pd_core import ocp
+from pd_core.config import OCP_CONTROL_POINTS
+from pd_interfaces.srv import ComputeTrajectory
+
+NODE_NAME = "pd_ocp_node"
+
+PARAMETERS: dict[str, tuple[Any, str, bool]] = {
+    "method": (
+        ocp.DEFAULT_METHOD,
+        f"Solver used when a request leaves `method` empty: one of {', '.join(ocp.METHODS)} "
+        "('slsqp' is the paper's SciPy SLSQP; 'qp' is the fast structured solver).",
+        False,
+    ),
+    "objective": (
+        "energy",
+        f"Objective when a request leaves `objective` empty: one of {', '.join(ocp.OBJECTIVES)} "
+        "('energy' = Eq. 4).",
+        False,
+    ),
+    "control_points": (
+        OCP_CONTROL_POINTS,
+        "Control points per axis when a request sends 0 (80 in Sec. 3.1).",
+        False,
+    ),
+    "timeout_s": (
+        60.0,
+        "Solve time limit (s) when a request sends timeout 0; a solve past it fails with "
+        "success=false and the reason.",
+        False,
+    ),
+    "max_pending": (
+        2,
+        "Requests held at once (one solves, the others wait); further ones get success=false "
+        "'busy' at once. Read at start-up (sizes the executor).",
+        True,
+    ),
+}
+
+_VECTOR_OF = ("x", "y", "z")
+
+
+def vectors(rows: np.ndarray) -> list[Vector3]:
+    return [Vector3(x=float(r[0]), y=float(r[1]), z=float(r[2])) for r in np.asarray(rows)]
+
+
+def fill_response(res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:
+    """Copy an OCPResult into the service response (trajectory only when the solve succeeded)."""
+    response.success = bool(res.success)
+    response.message = str(res.message)
+    response.solve_time = float(res.solve_time)
+    for key in ("time_of_flight", "fuel", "cost"):
+        v = float(getattr(res, key))
+        setattr(response, key, v if math.isfinite(v) else 0.0)
+    if len(res.states):
+        response.control_times = [float(t) for t in res.control_times]
+        response.thrust = vectors(res.thrust)
+        response.state_times = [float(t) for t in res.state_times]
+        response.positions = vectors(res.states[:, 0:3])
+        response.velocities = vectors(res.states[:, 3:6])
+        response.masses = [float(m) for m in res.states[:, 6]]
+
+
+def _warm_up() -> None:
+    """Solver process initialiser: import the solver once, not on the first request."""
+    import pd_core.ocp  # noqa: F401
+
+
+def _solver_pool() -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(
+        max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_warm_up
+    )
+
+
+# Extra wall time granted to a solver process beyond the solve's own time limit (transfer, a
+# last iteration) before it is declared hung and replaced.
+SOLVER_GRACE_S = 10.0
+
+
+class OcpNode(Node):
+    """Thin ROS adapter over `pd_core.ocp.solve`."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, text, read_only) in PARAMETERS.items():
+            self.declare_parameter(
+                name, default, ParameterDescriptor(description=text, read_only=read_only)
+            )
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.max_pending = max(1, int(self.get_parameter("max_pending").value))
+        self._solve_lock = threading.Lock()  # one solve at a time: they are CPU-bound
+        self._pool = _solver_pool()
+        self._pool.submit(math.sqrt, 1.0)  # start the solver process now
+        self._count_lock = threading.Lock()
+        self._pending = 0
+        self.served = 0
+        self.create_service(
+            ComputeTrajectory,
+            "/ocp/compute_trajectory",
+            self._on_request,
+            callback_group=ReentrantCallbackGroup(),
+        )
+        self.get_logger().info(
+            f"OCP service ready: method={self.get_parameter('method').value}, "
+            f"objective={self.get_parameter('objective').value}, "
+            f"control_points={self.get_parameter('control_points').value}, "
+            f"timeout_s={self.get_parameter('timeout_s').value}"
+        )
+
+    def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for p in params:
+            v = p.value
+            bad = (
+                (p.name == "method" and v not in ocp.METHODS)
+                or (p.name == "objective" and v not in ocp.OBJECTIVES)
+                or (p.name == "control_points" and not (isinstance(v, int) and v >= 2))
+                or (p.name == "timeout_s" and not (isinstance(v, float) and v > 0))
+            )
+            if bad:
+                return SetParametersResult(successful=False, reason=f"bad {p.name}: {v!r}")
+        return SetParametersResult(successful=True)
+
+    def _on_request(
+        self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response
+    ) -> ComputeTrajectory.Response:
+        with self._count_lock:
+            busy = self._pending >= self.max_pending
+            if not busy:
+                self._pending += 1
+        if busy:
+            response.success = False
+            response.message = f"busy: {self._pending} requests in progress; try again later"
+            return response
+        try:
+            return self._solve(request, response)
+        except Exception as exc:  # the node never dies of a request
+            self.get_logger().error(f"request failed: {exc!r}")
+            response = ComputeTrajectory.Response()
+            response.success = False
+            response.message = f"internal error: {exc!r}"
+            return response
+        finally:
+            with self._count_lock:
+                self._pending -= 1
+
+    def _solve(
+        self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response
+    ) -> ComputeTrajectory.Response:
+        position = [getattr(request.position, a) for a in _VECTOR_OF]
+        velocity = [getattr(request.velocity, a) for a in _VECTOR_OF]
+        method = request.method or str(self.get_parameter("method").value)
+        objective = request.objective or str(self.get_parameter("objective").value)
+        n_control = int(request.control_points) or int(self.get_parameter("control_points").value)
+        timeout = float(request.timeout) or float(self.get_parameter("timeout_s").value)
+        why = ocp.check_request(position, velocity, request.mass)
+        if why is None and not (math.isfinite(timeout) and timeout > 0):
+            why = f"timeout must be > 0 s, got {timeout!r}"
+        if why is not None:  # refuse at once, without queueing behind a running solve
+            response.success = False
+            response.message = f"bad request: {why}"
+            self.get_logger().warning(response.message)
+            return response
+        t_arrive = time.monotonic()
+        with self._solve_lock:
+            waited = time.monotonic() - t_arrive
+            left = timeout - waited
+            if left <= 0:
+                response.success = False
+                response.message = f"timeout: waited {waited:.1f} s for an earlier solve"
+                return response
+            res = self._solve_in_process(
+                position,
+                velocity,
+                float(request.mass),
+                method=method,
+                objective=objective,
+                n_control=n_control,
+                timeout_s=left,
+            )
+        fill_response(res, response)
+        if res.success and request.discretise:
+            self._discretise(res, response)
+        self.served += 1
+        text = (
+            f"request {self.served} from x = {np.round(position, 1).tolist()} m: "
+            f"success={res.success} ({res.message}); {method}/{objective}, "
+            f"t_f {res.time_of_flight:.2f} s, fuel {res.fuel:.1f} kg, "
+            f"solve {res.solve_time:.2f} s"
+        )
+        if res.success:  # one call site per severity (rclpy insists)
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text)
+        return response
+
+    def _solve_in_process(self, *args: Any, **kwargs: Any) -> ocp.OCPResult:
+        """`ocp.solve` in the solver process (caller holds the solve lock)."""
+        t0 = time.monotonic()
+        base = {"method": kwargs["method"], "objective": kwargs["objective"]}
+        try:
+            future = self._pool.submit(ocp.solve, *args, **kwargs)
+            return future.result(timeout=kwargs["timeout_s"] + SOLVER_GRACE_S)
+        except FutureTimeout:
+            why = f"timeout: the solver did not return within {kwargs['timeout_s']:.1f} s"
+        except BrokenProcessPool as exc:
+            why = f"solver process died: {exc}"
+        self.get_logger().error(f"{why}; starting a new solver process")
+        self._restart_pool()
+        return ocp.OCPResult(False, why, solve_time=time.monotonic() - t0, **base)
+
+    def _restart_pool(self) -> None:
+        old = self._pool
+        for proc in list(getattr(old, "_processes", {}).values()):
+            proc.terminate()
+        old.shutdown(wait=False, cancel_futures=True)
+        self._pool = _solver_pool()
+
+    def destroy_node(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        super().destroy_node()
+
+    def _discretise(self, res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:
+        """Discretised actions of Eqs. 5-7 (`pd_core.discretise.discretise`, (7, 7, 3) actions)."""
+        try:
+            from pd_core.discretise import discretise
+
+            run = discretise(res)
+        except Exception as exc:  # report, do not fail the trajectory that was solved
+            response.message += f"; discretisation failed: {exc}"
+            return
+        response.actions = [int(a) for a in np.asarray(run.actions).reshape(-1)]
+        start = np.asarray(run.initial_state, dtype=float)
+        response.discrete_initial_position = Vector3(
+            x=float(start[0]), y=float(start[1]), z=float(start[2])
+        )
+        response.discrete_landed = bool(run.landed)
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = None
+    executor = None
+    try:
+        node = OcpNode()
+        executor = MultiThreadedExecutor(num_threads=node.max_pending + 2)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,257 @@
+"""pd_core.sim: command validation, episode bookkeeping, equivalence with the env, the ticker."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.env import PoweredDescentEnv, Status
+from pd_core.sim import (
+    Command,
+    FixedRateTicker,
+    Simulator,
+    check_command,
+    describe_end,
+    percentiles_ms,
+)
+
+TABLE = DEFAULT_ACTIONS.table_n
+HOVER = int(DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 2])))  # 0, 0, 13 kN
+
+
+def cmd(episode: int, step: int, action: int, thrust=None) -> Command:
+    t = TABLE[action] if thrust is None else thrust
+    return Command(episode, step, action, tuple(float(v) for v in t))
+
+
+def test_check_command_accepts_valid():
+    assert check_command(cmd(1, 4, 10), 1, 4) is None
+
+
+@pytest.mark.parametrize("action", [-1, 147, 1000, 2.5, None, True])
+def test_check_command_rejects_unknown_action(action):
+    c = Command(1, 0, action, (0.0, 0.0, 0.0))
+    kind, msg = check_command(c, 1, 0)
+    assert kind == "action"
+    assert "unknown action" in msg
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_check_command_rejects_non_finite_thrust(bad):
+    kind, msg = check_command(cmd(1, 0, 5, (bad, 0.0, 0.0)), 1, 0)
+    assert kind == "thrust"
+    assert "NaN or infinite" in msg
+
+
+def test_check_command_rejects_thrust_not_matching_action():
+    t = TABLE[5].copy()
+    t[2] += 1.0
+    kind, msg = check_command(cmd(1, 0, 5, t), 1, 0)
+    assert kind == "thrust"
+    assert "does not match action 5" in msg
+
+
+def test_check_command_timing():
+    assert check_command(cmd(1, 3, 0), 1, 4)[0] == "stale"
+    assert check_command(cmd(0, 9, 0), 1, 0)[0] == "stale"
+    assert check_command(cmd(1, 5, 0), 1, 4)[0] == "ahead"
+    assert check_command(cmd(1, 5, 0), None, None)[0] == "idle"
+    # content is judged before timing
+    assert check_command(cmd(1, 3, 0, (np.nan, 0, 0)), 1, 4)[0] == "thrust"
+
+
+def test_reset_numbers_episodes_and_uses_given_state():
+    sim = Simulator(seed=3)
+    s0 = np.array([500.0, 20.0, 2500.0, -10.0, 5.0, -80.0, 2000.0])
+    ep, init, interrupted = sim.reset(initial_state=s0)
+    assert (ep, sim.step, sim.flying, interrupted) == (1, 0, True, None)
+    np.testing.assert_array_equal(init, s0)
+    ep2, init2, interrupted = sim.reset()
+    assert ep2 == 2
+    assert interrupted is not None and interrupted["status"] == int(Status.FLYING)
+    assert "interrupted" in interrupted["reason"]
+    assert not np.array_equal(init2, s0)
+
+
+def test_reset_rejects_bad_state_and_keeps_episode():
+    sim = Simulator(seed=1)
+    sim.reset()
+    sim.submit(cmd(1, 0, HOVER))
+    sim.advance()
+    with pytest.raises(ValueError, match="NaN"):
+        sim.reset(initial_state=[np.nan] * 7)
+    with pytest.raises(ValueError, match="mass"):
+        sim.reset(initial_state=[0, 0, 100, 0, 0, 0, -1])
+    assert (sim.episode, sim.step, sim.flying) == (1, 1, True)
+
+
+def test_same_seed_same_initial_state_as_env():
+    sim = Simulator()
+    _, init, _ = sim.reset(seed=42)
+    _, info = PoweredDescentEnv().reset(seed=42)
+    np.testing.assert_array_equal(init, info["state"])
+
+
+def _fly_env(seed, s0, actions):
+    env = PoweredDescentEnv()
+    env.reset(seed=seed, options={"initial_state": s0})
+    for a in actions:
+        _, _, term, trunc, info = env.step(a)
+        if term or trunc:
+            break
+    return info
+
+
+def test_flying_commands_matches_env_bit_for_bit():
+    rng = np.random.default_rng(0)
+    s0 = np.array([800.0, -300.0, 2450.0, -40.0, 10.0, -80.0, 2000.0])
+    acts = [int(a) for a in rng.integers(0, 147, size=400)]
+    sim = Simulator()
+    sim.reset(initial_state=s0, seed=7)
+    for a in acts:
+        assert sim.submit(cmd(sim.episode, sim.step, a)) is None
+        assert sim.has_fresh_command
+        out = sim.advance()
+        assert out.fresh and out.action == a
+        if out.done:
+            break
+    info = _fly_env(7, s0, acts)
+    np.testing.assert_array_equal(sim.state, info["state"])
+    assert out.result["status"] == info["status"]
+    assert out.result["steps"] == sim.step
+
+
+def test_rejected_commands_are_counted_and_never_applied():
+    sim = Simulator(missing_command="zero")
+    sim.reset(seed=5)
+    twin = Simulator(missing_command="zero")
+    twin.reset(seed=5)
+    sim.submit(cmd(1, 0, HOVER))
+    sim.advance()
+    twin.submit(cmd(1, 0, HOVER))
+    twin.advance()
+    bad = [
+        Command(1, 1, 999, (0.0, 0.0, 0.0)),  # unknown action
+        cmd(1, 1, 3, (np.nan, 0.0, 0.0)),  # NaN thrust
+        cmd(1, 0, 3),  # stale step
+        cmd(0, 1, 3),  # stale episode
+        cmd(1, 2, 3),  # ahead
+    ]
+    for c in bad:
+        assert sim.submit(c) is not None
+    assert not sim.has_fresh_command
+    out = sim.advance()
+    assert not out.fresh
+    twin.advance()  # zero thrust on both
+    np.testing.assert_array_equal(sim.state, twin.state)
+    assert sim.counters.rejected_commands == 5
+    assert sim.counters.rejected_by_reason == {"action": 1, "thrust": 1, "stale": 2, "ahead": 1}
+    result = sim.reset()[2]
+    assert result["rejected_commands"] == 5
+    assert result["missed_commands"] == 1
+
+
+def test_latest_valid_command_wins():
+    sim = Simulator()
+    sim.reset(seed=0)
+    sim.submit(cmd(1, 0, 3))
+    sim.submit(cmd(1, 0, HOVER))
+    assert sim.advance().action == HOVER
+
+
+@pytest.mark.parametrize(("mode", "expected"), [("hold", HOVER), ("zero", None)])
+def test_missing_command_hold_or_zero(mode, expected):
+    sim = Simulator(missing_command=mode)
+    sim.reset(seed=0)
+    first = sim.advance()  # nothing to hold yet: zero thrust
+    assert (first.action, first.thrust_n, first.fresh) == (None, (0.0, 0.0, 0.0), False)
+    sim.submit(cmd(1, 1, HOVER))
+    assert sim.advance().action == HOVER
+    out = sim.advance()
+    assert out.action == expected and not out.fresh
+    if expected is None:
+        assert out.thrust_n == (0.0, 0.0, 0.0)
+    assert sim.counters.missed_commands == 2
+
+
+def test_free_fall_crashes_with_reason_and_stops():
+    sim = Simulator(disturbance=False)
+    sim.reset(initial_state=[0.0, 0.0, 50.0, 0.0, 0.0, -20.0, 2000.0])
+    while True:
+        out = sim.advance()
+        if out.done:
+            break
+    r = out.result
+    assert out.status == Status.CRASHED and not r["landed"]
+    assert r["status"] == int(Status.CRASHED)
+    assert "too fast" in r["reason"]
+    assert r["fuel"] == 0.0 and r["missed_commands"] == r["steps"]
+    assert not sim.flying
+    assert sim.submit(cmd(1, sim.step, 0))[0] == "idle"
+    with pytest.raises(RuntimeError):
+        sim.advance()
+
+
+def test_out_of_time_is_reported():
+    sim = Simulator(max_time_s=1.0)
+    sim.reset(seed=2)
+    outs = [sim.advance() for _ in range(5)]
+    assert [o.done for o in outs] == [False] * 4 + [True]
+    assert outs[-1].status == Status.OUT_OF_TIME
+    assert outs[-1].result["reason"].startswith("out of time")
+
+
+def test_describe_end_landed():
+    text = describe_end(Status.LANDED, np.array([0.5, 0, 0.0, 0, 0, -1.0, 1600]), 60.0)
+    assert text.startswith("landed")
+
+
+def test_bad_constructor_arguments():
+    with pytest.raises(ValueError, match="missing_command"):
+        Simulator(missing_command="last")
+    with pytest.raises(ValueError, match="max_time_s"):
+        Simulator(max_time_s=0.0)
+
+
+def test_ticker_keeps_rate_without_drift():
+    ticks: list[float] = []
+    ticker = FixedRateTicker(0.02, lambda: ticks.append(time.monotonic()))
+    ticker.start()
+    time.sleep(0.5)
+    ticker.stop()
+    assert ticker.error is None
+    periods = np.diff(ticks)
+    assert 20 <= len(ticks) <= 26
+    # drift-free: the mean period is the nominal one even if single wake-ups are late
+    assert abs((ticks[-1] - ticks[0]) / (len(ticks) - 1) - 0.02) < 0.002
+    assert np.all(periods > 0)
+
+
+def test_ticker_skips_missed_deadlines_and_keeps_errors():
+    calls = []
+
+    def slow():
+        calls.append(1)
+        if len(calls) == 1:
+            time.sleep(0.055)
+        if len(calls) == 3:
+            raise RuntimeError("boom")
+
+    ticker = FixedRateTicker(0.02, slow)
+    ticker.start()
+    time.sleep(0.2)
+    ticker.stop()
+    assert ticker.skipped >= 2
+    assert isinstance(ticker.error, RuntimeError)
+    assert len(calls) == 3
+
+
+def test_percentiles_ms():
+    p = percentiles_ms([0.001, 0.002, 0.003])
+    assert p["n"] == 3 and p["p50"] == pytest.approx(2.0) and p["max"] == pytest.approx(3.0)
+    assert percentiles_ms([])["n"] == 0
+    with pytest.raises(ValueError):
+        FixedRateTicker(0.0, lambda: None)
