@@ -34,7 +34,9 @@ Methods:
   from the solution in SQP passes that linearise the terminal state with its exact Jacobian (mass
   sensitivity included, so a fixed point is a true KKT point of Eq. 4), and t_f is found as the
   root of the envelope derivative dJ*/dt_f. "fuel" uses the same scheme with an LP (HiGHS) over
-  T = T+ - T- and a bounded scalar search over t_f.
+  T = T+ - T- and a bounded scalar search over t_f, then, at the chosen t_f, an elastic
+  trust-region SLP (`_fuel_slp`) with one-sided Jacobians at T = 0: the plain LP passes can cycle
+  between two bang-bang vertices that each miss rest by up to ~1 m/s.
 * Eq. 4 with the mass-dependent |T| of Eq. 3 is non-convex: burning a little sideways fuel
   lightens the lander, which pays off when T3 is saturated, so lateral thrust avoids 0 and there
   are several local optima whose costs differ by up to ~0.5 %. Both methods find local optima.
@@ -246,9 +248,20 @@ def _objective_value(fl: _Flight, g: _Grid, objective: str) -> float:
 
 
 def _gradients(
-    p: np.ndarray, g: _Grid, x0: np.ndarray, v0: np.ndarray, m0: float, objective: str
+    p: np.ndarray,
+    g: _Grid,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    m0: float,
+    objective: str,
+    sign: float | None = None,
 ) -> tuple[float, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
     """(J, dJ/dp, dJ/dt_f, c, dc/dp (6, N, 3), dc/dt_f (6,)) with c = [x_f, v_f], exactly.
+
+    `sign` (+1 or -1) replaces sign(u) = 0 in d|u|/du at the steps whose thrust is exactly 0:
+    the one-sided derivatives at the kink of |u| in the mass, for a move of that sign (the fuel
+    LP's T+ and T- columns; sign(0) = 0 would drop the mass effect of switching on a thrust that
+    is 0 now, and the LP's bang-bang iterates are full of such zeros).
 
     Reverse mode by hand: each output depends on u_i directly through the gains and indirectly
     through the mass of every later step (m_l = m0 - sum_{j<l} burn_j), a reverse cumulative sum.
@@ -269,7 +282,7 @@ def _gradients(
     b_adj = gk * dk_dm + gh * dh_dm
     later = np.cumsum(b_adj[:, ::-1], axis=1)[:, ::-1] - b_adj  # sum over later steps
     mdot_adj = a_adj - dt * later
-    sg = np.sign(u)
+    sg = np.sign(u) if sign is None else np.where(u == 0.0, sign, np.sign(u))
     du = (mdot_adj / c_e)[:, :, None] * sg[None]
     cx = k * r + h
     for a in range(3):
@@ -653,6 +666,101 @@ def _fuel_lp_at(
     return _fly(p, g, x0, v0, m0).fuel, math.nan, p
 
 
+# Fuel SLP: elastic, trust-region sequential LP. The thrust is split T = T+ - T- (T+, T- >= 0)
+# and the terminal state is linearised in each with its one-sided exact Jacobian (sign +1 for
+# T+, -1 for T-), so switching on a thrust that is 0 now counts its mass effect. Slacks on the
+# 6 linearised terminal rows keep every LP feasible; steps are accepted on the l1 merit
+# fuel + mu |c| (mu above the multipliers, ~1 kg per m/s) and the box |T' - T| <= delta adapts.
+_FUEL_MERIT_MU = np.array([50.0, 50.0, 50.0, 50.0, 50.0, 50.0])  # kg per m, kg per m/s
+_FUEL_TR_MAX_ITER = 60
+
+
+def _fuel_lp_step(
+    p: np.ndarray,
+    g: _Grid,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    m0: float,
+    limits: ThrustLimits,
+    delta_kn: float,
+) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """One elastic LP of the SLP at control points p (N, 3) N within a box of delta_kn kN.
+
+    Returns (p' (N, 3) N, predicted l1-merit reduction, c(p)), None if HiGHS fails.
+    """
+    n = p.shape[0]
+    wsum = g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
+    jp = _gradients(p, g, x0, v0, m0, "fuel", sign=1.0)
+    jm = _gradients(p, g, x0, v0, m0, "fuel", sign=-1.0)
+    c_now = jp[3]
+    a_plus = jp[4].transpose(0, 2, 1) * _KN  # (6, 3, N) per kN
+    a_minus = -jm[4].transpose(0, 2, 1) * _KN
+    cur = p.T / _KN
+    pos, neg = np.maximum(cur, 0.0), np.maximum(-cur, 0.0)
+    rhs = np.einsum("oan,an->o", a_plus, pos) + np.einsum("oan,an->o", a_minus, neg) - c_now
+    # columns: [T+ axis 0, T- axis 0, T+ axis 1, ...] (6N), then slacks s+ (6), s- (6)
+    a_thr = np.stack([a_plus, a_minus], axis=2).reshape(6, 6 * n)
+    eye = np.eye(6)
+    a_eq = np.concatenate([a_thr, eye, -eye], axis=1)
+    cost = np.concatenate([np.tile(wsum, 6) * _KN, _FUEL_MERIT_MU, _FUEL_MERIT_MU])
+    hi_pm = np.stack([np.maximum(limits.hi, 0.0), np.maximum(-limits.lo, 0.0)], 1) / _KN
+    cur_pm = np.stack([pos, neg], axis=1)  # (3, 2, N)
+    lb = np.maximum(cur_pm - delta_kn, 0.0).reshape(-1)
+    ub = np.minimum(cur_pm + delta_kn, hi_pm[:, :, None]).reshape(-1)
+    lb = np.minimum(lb, ub)
+    bounds = np.stack(
+        [np.concatenate([lb, np.zeros(12)]), np.concatenate([ub, np.full(12, np.inf)])], 1
+    )
+    res = linprog(cost, A_eq=a_eq, b_eq=rhs, bounds=bounds, method="highs")
+    if res.status != 0:
+        return None
+    xs = res.x[: 6 * n].reshape(3, 2, n)
+    p_new = (xs[:, 0] - xs[:, 1]).T * _KN
+    lin_now = float(np.tile(wsum, 6) @ cur_pm.reshape(-1)) * _KN + _FUEL_MERIT_MU @ np.abs(c_now)
+    return p_new, lin_now - float(res.fun), c_now
+
+
+def _fuel_merit(fl: _Flight) -> float:
+    return fl.fuel + float(_FUEL_MERIT_MU @ np.abs(np.concatenate([fl.xf, fl.vf])))
+
+
+def _fuel_slp(
+    p: np.ndarray,
+    g: _Grid,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    m0: float,
+    limits: ThrustLimits,
+    max_iter: int,
+    delta_kn: float = 4.0,
+    tol_kg: float = 1e-6,
+    deadline: float = math.inf,
+) -> np.ndarray | None:
+    """Trust-region SLP on fuel at fixed t_f from p (N, 3) N; the best control points found."""
+    merit = _fuel_merit(_fly(p, g, x0, v0, m0))
+    for _ in range(max_iter):
+        if time.perf_counter() > deadline:
+            raise _Timeout
+        step = _fuel_lp_step(p, g, x0, v0, m0, limits, delta_kn)
+        if step is None:
+            return None
+        p_new, pred, _ = step
+        merit_new = _fuel_merit(_fly(p_new, g, x0, v0, m0))
+        actual = merit - merit_new
+        if pred <= tol_kg * max(merit, 1.0):
+            break  # the linearised merit cannot improve: a KKT point of the l1 problem
+        if actual >= 0.1 * pred:
+            moved = np.abs(p_new - p).max() / _KN
+            p, merit = p_new, merit_new
+            if actual >= 0.75 * pred and moved >= 0.99 * delta_kn:
+                delta_kn = min(2.0 * delta_kn, 24.0)
+        else:
+            delta_kn *= 0.25
+            if delta_kn < 1e-6:
+                break
+    return p
+
+
 def _solve_fast(
     x0: np.ndarray,
     v0: np.ndarray,
@@ -685,6 +793,12 @@ def _solve_fast(
         else:
             t_f = _tf_golden(f, tf0, tf_tol_s * 5)
         val, _, p = (math.inf, 0.0, None) if t_f is None else f(t_f, final_passes)
+        if objective == "fuel" and p is not None and t_f is not None:
+            # The plain LP passes can cycle between two bang-bang vertices that each miss rest
+            # (up to ~1 m/s); the trust-region SLP converges to a schedule that reaches it.
+            g = _Grid.make(t_f, n_control)
+            p = _fuel_slp(p, g, x0, v0, m0, limits, _FUEL_TR_MAX_ITER, deadline=deadline)
+            val = math.inf if p is None else _fly(p, g, x0, v0, m0).fuel
     except _Timeout:
         return st.p, tf0, st.evals, "timed out", False
     if t_f is None or p is None or not math.isfinite(val):
