@@ -38,9 +38,11 @@ MODEL_ENV = "PD_MODEL_PATH"
 SHIPPED_MODEL = Path("models") / "best.pt"
 
 # RELIABLE, VOLATILE like pd_sim_node's /lander/state publisher and /lander/thrust_cmd
-# subscription. Both keep 100 messages (depth is not part of QoS matching): a burst of states
-# (pd_replay, a busy CPU) is queued and answered one by one instead of dropped, and slower
-# subscribers of the commands (recorder, monitors) catch up after lockstep bursts.
+# subscription (depth is not part of QoS matching). The subscription keeps 100: a burst of
+# states (pd_replay, a busy CPU) is queued and answered one by one instead of dropped. The
+# command publisher keeps 1000 (more than a 750-step episode), so slower subscribers (recorder,
+# monitors) catch up after lockstep bursts: a full KEEP_LAST writer history drops samples that a
+# slow reader has not acknowledged yet.
 LOOP_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=100,
@@ -49,7 +51,7 @@ LOOP_QOS = QoSProfile(
 )
 CMD_PUB_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=100,
+    depth=1000,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )

@@ -39,8 +39,10 @@ NODE_NAME = "pd_sim_node"
 
 # State and commands: every message counts, nobody needs old ones (compatible with any
 # RELIABLE or BEST_EFFORT, VOLATILE subscriber). The subscription keeps 10; the state publisher
-# keeps 100 unacknowledged messages, so a slower subscriber (recorder, monitor) catches up after
-# a lockstep burst instead of losing states (depth is not part of QoS matching).
+# keeps 1000 unacknowledged messages (more than a whole 750-step episode), so a slower subscriber
+# (recorder, monitor) catches up after a lockstep burst instead of losing states: a KEEP_LAST
+# writer drops its oldest sample for every reader once its history is full (depth is not part
+# of QoS matching).
 LOOP_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=10,
@@ -49,7 +51,7 @@ LOOP_QOS = QoSProfile(
 )
 STATE_PUB_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=100,
+    depth=1000,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
