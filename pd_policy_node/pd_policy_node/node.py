@@ -35,7 +35,8 @@ from pd_interfaces.msg import LanderState, ThrustCommand
 
 NODE_NAME = "pd_policy_node"
 MODEL_ENV = "PD_MODEL_PATH"
-SHIPPED_MODEL = Path("models") / "best.pt"
+# The shipped policy (models/pd_dqn_best.md says how it was trained and how it scores).
+SHIPPED_MODEL = Path("models") / "pd_dqn_best.pt"
 
 # RELIABLE, VOLATILE like pd_sim_node's /lander/state publisher and /lander/thrust_cmd
 # subscription (depth is not part of QoS matching). The subscription keeps 100: a burst of
