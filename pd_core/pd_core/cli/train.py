@@ -1,0 +1,70 @@
+"""`pd-train`: train a DQN lander policy (Sec. 2.3, 3.2) from a preset plus flags.
+
+Examples:
+    pd-train --preset paper-agent1 --seed 1
+    pd-train --preset best --seed 1 --max-minutes 55
+    pd-train --resume runs/best__1__20260101-120000 --max-minutes 80
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import fields
+
+from pd_core.dqn.config import PRESETS, TrainConfig, add_arguments, from_args
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="pd-train",
+        description="Train a DQN powered-descent policy. Presets: " + ", ".join(sorted(PRESETS)),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    add_arguments(p)
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    p.add_argument("--print-config", action="store_true", help="print the resolved config and exit")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    import torch
+
+    from pd_core.dqn.train import Trainer
+
+    if args.resume:
+        overrides = {
+            f.name: getattr(args, f.name)
+            for f in fields(TrainConfig)
+            if f.name not in ("preset", "resume") and getattr(args, f.name, None) is not None
+        }
+        try:
+            trainer = Trainer.resume(args.resume, overrides)
+        except (OSError, ValueError, KeyError) as exc:
+            print(f"pd-train: cannot resume from {args.resume}: {exc}", file=sys.stderr)
+            return 2
+    else:
+        cfg = from_args(args)
+        if args.print_config:
+            print(json.dumps(cfg.to_dict(), indent=2))
+            return 0
+        torch.set_num_threads(max(cfg.torch_threads, 1))
+        try:
+            trainer = Trainer(cfg)
+        except (FileNotFoundError, ValueError) as exc:
+            print(f"pd-train: {exc}", file=sys.stderr)
+            return 2
+    print(f"pd-train: run folder {trainer.run_dir}", file=sys.stderr)
+    summary = trainer.run()
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for k, v in summary.items():
+            print(f"{k}: {v}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

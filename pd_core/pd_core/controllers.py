@@ -1,0 +1,92 @@
+"""Reference closed-loop controllers quantised to the discrete action set (Sec. 4.2).
+
+`ZemZevController` is a feedback guidance law (not in the paper; ours): the vertical axis
+follows a constant-deceleration braking profile v_z(z) = -sqrt(v_land^2 + 2 a_brake z) (coast,
+then brake: a near bang-bang, fuel-lean profile) that flattens to v_land + c z near the pad; the
+horizontal axes use the ZEM/ZEV law a = -6 r / t_go^2 - 4 v / t_go, with t_go the time left on
+that braking profile. The commanded thrust T = m (a - g) is rounded to the nearest of the
+7 x 7 x 3 levels. It is Markov (a function of the state only), so a Q-network can imitate it, and
+it flies the disturbed env, so its transitions are on-distribution demonstrations.
+`pd-eval --controller zemzev` evaluates it like a trained policy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
+from pd_core.config import GRAVITY_MPS2
+from pd_core.state import check_state
+
+
+@dataclass(frozen=True)
+class ZemZevParams:
+    """Gains of the reference controller (ours, tuned on Table 3 with disturbances)."""
+
+    brake_accel_mps2: float = 2.5  # vertical braking deceleration of the profile
+    land_speed_mps: float = 0.8  # descent speed the profile aims at on the pad
+    vz_gain_per_s: float = 6.0  # vertical velocity-error gain (1/s)
+    min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
+    flare_altitude_m: float = 0.5  # below this, horizontal axes only null velocity
+    vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
+    final_slope_per_s: float = 0.3  # near the pad descend no faster than land + this * z
+    law: str = "zemzev"  # horizontal law: "zemzev" or "vtrack" (v_ref = -r / t_go)
+
+
+class ZemZevController:
+    """Greedy-style interface of `pd_core.policy.Policy`: `act`, `act_batch`, `thrust`."""
+
+    name = "zemzev"
+
+    def __init__(
+        self, params: ZemZevParams | None = None, actions: ActionSpace = DEFAULT_ACTIONS
+    ) -> None:
+        self.params = params or ZemZevParams()
+        self.actions = actions
+        self._lo = actions.limits.lo
+        self._hi = actions.limits.hi
+        self._n = np.asarray(actions.n_per_axis)
+
+    def thrust_command(self, states: np.ndarray) -> np.ndarray:
+        """Continuous thrust (B, 3) in N before quantisation."""
+        p = self.params
+        s = np.atleast_2d(states)
+        r, v, m = s[:, 0:3], s[:, 3:6], s[:, 6]
+        z = np.maximum(r[:, 2], 0.0)
+        brake = np.sqrt(p.land_speed_mps**2 + 2.0 * p.brake_accel_mps2 * z)
+        vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
+        az = p.vz_gain_per_s * (vz_ref - v[:, 2])
+        # time left on the braking profile (the coast before it is ignored: t_go is an estimate)
+        tgo = np.maximum((brake - p.land_speed_mps) / p.brake_accel_mps2, p.min_tgo_s)
+        if p.law == "zemzev":
+            a_h = -6.0 * r[:, 0:2] / tgo[:, None] ** 2 - 4.0 * v[:, 0:2] / tgo[:, None]
+        else:
+            a_h = p.vel_gain_per_s * (-r[:, 0:2] / tgo[:, None] - v[:, 0:2])
+        flare = (r[:, 2] < p.flare_altitude_m)[:, None]
+        a_h = np.where(flare, -p.vel_gain_per_s * v[:, 0:2], a_h)
+        a = np.concatenate([a_h, az[:, None]], axis=1)
+        return m[:, None] * (a - GRAVITY_MPS2)
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        """Actions (B,) for physical states (B, 7): the command rounded to the nearest level."""
+        t = self.thrust_command(check_state(states).reshape(-1, 7))
+        frac = np.clip((t - self._lo) / (self._hi - self._lo), 0.0, 1.0)
+        levels = np.rint(frac * (self._n - 1)).astype(np.int64)
+        return self.actions.levels_to_action(levels)
+
+    def act(self, state: np.ndarray) -> int:
+        return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
+
+    def thrust(self, action: int) -> np.ndarray:
+        return self.actions.thrust(int(action))
+
+
+CONTROLLERS = {"zemzev": ZemZevController}
+
+
+def make_controller(name: str) -> ZemZevController:
+    if name not in CONTROLLERS:
+        raise ValueError(f"unknown controller {name!r}; choose from {sorted(CONTROLLERS)}")
+    return CONTROLLERS[name]()

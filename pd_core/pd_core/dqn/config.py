@@ -1,0 +1,214 @@
+"""Training configuration: one dataclass, a docstring per field, turned into `pd-train` flags.
+
+Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200)
+and `best` (what won our comparisons; see models/<name>.md). Flags given on the command line
+override the preset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from pd_core.config import DQN_PAPER
+
+
+@dataclass
+class TrainConfig:
+    preset: str = "paper-agent1"
+    """preset the other fields start from: paper-agent1, paper-agent2 or best"""
+    seed: int = 1
+    """seed of torch, numpy and the envs: the same seed gives the same weights on CPU"""
+    episodes: int = DQN_PAPER.episodes
+    """training stops after this many finished episodes (summed over the batched envs)"""
+    max_minutes: float = 0.0
+    """training also stops after this many minutes of wall time (0: no limit)"""
+    max_updates: int = 0
+    """training also stops after this many gradient updates (0: no limit)"""
+    num_envs: int = 1
+    """batched environments stepped together (the paper: 1)"""
+    updates_per_step: float = 1.0
+    """gradient updates per (batched) env step; fractions accumulate"""
+    learning_starts: int = 1000
+    """agent transitions stored before the first gradient update"""
+    hidden: tuple[int, ...] = DQN_PAPER.hidden
+    """hidden units of the Q-network (Table 2)"""
+    activation: str = "tanh"
+    """activation of the hidden layers: tanh (paper) or relu"""
+    input_norm_init: bool = False
+    """fold a standardisation of the scaled inputs (mean/std of visited states) into the first
+    layer's initial weights; same architecture, better-conditioned start"""
+    optimizer: str = "rmsprop"
+    """rmsprop (paper) or adam"""
+    lr: float = DQN_PAPER.learning_rate
+    """learning rate (Table 2: 1e-5)"""
+    lr_finetune: float = 0.0
+    """learning rate once pre-training on demonstrations is over (0: keep lr)"""
+    grad_clip: float = 0.0
+    """clip the gradient norm to this (0: off)"""
+    epsilon0: float = DQN_PAPER.epsilon0
+    """initial exploration rate epsilon_0 (Table 2)"""
+    epsilon_final: float = 0.0
+    """exploration rate at the end of the schedule"""
+    epsilon_episodes: int = DQN_PAPER.epsilon_episodes
+    """finished episodes over which epsilon decays linearly (Table 2: n_eps = 4000)"""
+    gamma: float = DQN_PAPER.gamma
+    """discount factor (Table 2)"""
+    batch_agent: int = DQN_PAPER.batch_agent
+    """k: agent transitions per minibatch (Table 2; Agent 2: 200)"""
+    batch_demo: int = DQN_PAPER.batch_demo
+    """k_demo: demonstration transitions per minibatch (0: no demonstrations)"""
+    target_period: int = DQN_PAPER.target_period_steps
+    """n_T: the target network is copied every this many gradient updates (= env steps at 1/1)"""
+    buffer_size: int = 1_000_000
+    """capacity of the agent replay memory (FIFO); the demonstration memory is never overwritten"""
+    double_dqn: bool = False
+    """double DQN: the online network picks the next action, the target network values it"""
+    n_step: int = 1
+    """n-step returns (1: Eq. 11)"""
+    loss: str = "mse"
+    """mse (Eq. 11, the paper) or huber"""
+    margin: float = 0.0
+    """weight of DQfD's large-margin loss on demonstration transitions (0: off)"""
+    margin_value: float = 0.8
+    """margin l(a_E, a) for a != a_E in the large-margin loss"""
+    demos: str = "data/demos_7x7x3.npz"
+    """demonstration file (pd_core.demos format; empty: none)"""
+    controller_demo_episodes: int = 0
+    """episodes flown by the reference controller (pd_core.controllers) added as demonstrations"""
+    controller: str = "zemzev"
+    """reference controller used for controller demonstrations"""
+    pretrain_updates: int = 0
+    """gradient updates on demonstrations only before interaction starts (DQfD pre-training)"""
+    fuel_weight: float = 1.0
+    """multiplies beta (control effort) of the training reward; evaluation is unaffected"""
+    eval_every_s: float = 60.0
+    """greedy evaluation on eval_episodes seeded episodes every this many seconds (0: off)"""
+    eval_episodes: int = 200
+    """episodes of each periodic greedy evaluation (seed eval_seed, separate from pd-eval's)"""
+    eval_seed: int = 900_000
+    """seed of the periodic evaluations"""
+    checkpoint_every_s: float = 300.0
+    """write a resumable checkpoint this often (and at the end)"""
+    run_dir: str = ""
+    """run folder (default runs/<preset>__<seed>__<time>)"""
+    resume: str = ""
+    """run folder or checkpoint.pt to resume: networks, optimiser, replay memories, schedules"""
+    torch_threads: int = 1
+    """torch CPU threads (1 keeps runs repeatable and leaves the other core free)"""
+    progress: bool = True
+    """show a tqdm progress bar"""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["hidden"] = list(self.hidden)
+        return d
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # Table 2, Sec. 2.3 and 3.2: one env, one update per step, the 33 OCP demonstrations.
+    "paper-agent1": {},
+    # Sec. 3.2: no demonstrations, k = 200.
+    "paper-agent2": {"batch_agent": DQN_PAPER.batch_agent_no_demo, "batch_demo": 0, "demos": ""},
+    # Ours: what won against paper-agent1 on the same evaluation (see models/*.md).
+    "best": {
+        "num_envs": 32,
+        "updates_per_step": 1.0,
+        "learning_starts": 5000,
+        "episodes": 1_000_000,
+        "max_minutes": 55.0,
+        "optimizer": "adam",
+        "lr": 1e-3,
+        "lr_finetune": 1e-4,
+        "grad_clip": 10.0,
+        "epsilon0": 0.05,
+        "epsilon_final": 0.0,
+        "epsilon_episodes": 2000,
+        "batch_agent": 128,
+        "batch_demo": 128,
+        "target_period": 1000,
+        "buffer_size": 500_000,
+        "double_dqn": True,
+        "n_step": 3,
+        "loss": "huber",
+        "margin": 1.0,
+        "demos": "",
+        "controller_demo_episodes": 1000,
+        "pretrain_updates": 60_000,
+        "eval_every_s": 150.0,
+        "eval_episodes": 300,
+    },
+}
+
+
+def preset(name: str, **overrides: Any) -> TrainConfig:
+    """TrainConfig of a preset with field overrides."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}")
+    return replace(TrainConfig(), preset=name, **{**PRESETS[name], **overrides})
+
+
+def field_docs() -> dict[str, str]:
+    """The docstring under each field (CleanRL style), read from the source."""
+    src = inspect.getsource(TrainConfig).splitlines()
+    docs: dict[str, str] = {}
+    names = {f.name for f in fields(TrainConfig)}
+    for i, line in enumerate(src[:-1]):
+        head = line.strip().split(":")[0]
+        nxt = src[i + 1].strip()
+        if head in names and nxt.startswith('"""'):
+            text = nxt[3:]
+            j = i + 1
+            while not text.endswith('"""') and j + 1 < len(src):
+                j += 1
+                text += " " + src[j].strip()
+            docs[head] = text.removesuffix('"""').strip()
+    return docs
+
+
+def _parse_bool(s: str) -> bool:
+    v = s.lower()
+    if v in ("1", "true", "yes", "on"):
+        return True
+    if v in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected a boolean, got {s!r}")
+
+
+def _parse_tuple(s: str) -> tuple[int, ...]:
+    v = ast.literal_eval(s) if s.strip().startswith(("(", "[")) else s.split(",")
+    return tuple(int(x) for x in v)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One flag per field (`--batch-agent 100`); defaults are None so presets can fill them."""
+    docs = field_docs()
+    for f in fields(TrainConfig):
+        flag = "--" + f.name.replace("_", "-")
+        default = f.default if f.default is not dataclasses.MISSING else None
+        help_ = f"{docs.get(f.name, '')} (preset default; base {default!r})"
+        if f.name == "preset":
+            parser.add_argument(flag, default="paper-agent1", choices=sorted(PRESETS), help=help_)
+        elif f.type in ("bool", bool):
+            parser.add_argument(flag, type=_parse_bool, nargs="?", const=True, help=help_)
+        elif f.name == "hidden":
+            parser.add_argument(flag, type=_parse_tuple, help=help_ + "; e.g. 300,200,300")
+        else:
+            typ = {"int": int, "float": float, "str": str}[str(f.type)]
+            parser.add_argument(flag, type=typ, help=help_)
+
+
+def from_args(ns: argparse.Namespace) -> TrainConfig:
+    overrides = {
+        f.name: getattr(ns, f.name)
+        for f in fields(TrainConfig)
+        if f.name != "preset" and getattr(ns, f.name, None) is not None
+    }
+    return preset(ns.preset, **overrides)
+
+
+__all__ = ["PRESETS", "TrainConfig", "add_arguments", "field", "field_docs", "from_args", "preset"]

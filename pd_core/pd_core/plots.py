@@ -1,0 +1,187 @@
+"""Figures: training curves, and Figs. 5-8 of the paper from training logs and evaluations.
+
+matplotlib is imported lazily with the Agg backend, so this module loads on headless machines.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def read_csv(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a CSV log as float arrays (empty arrays for an empty log)."""
+    with Path(path).open() as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return {}
+    head, body = rows[0], rows[1:]
+    cols = {h: np.array([float(r[i]) for r in body], dtype=float) for i, h in enumerate(head)}
+    return cols
+
+
+def training_curves(run_dir: str | Path, out: str | Path) -> Path:
+    """2x3 panels: return, success rate, loss, epsilon against episodes; eval success and fuel
+    against wall time."""
+    plt = _plt()
+    rd = Path(run_dir)
+    ep = read_csv(rd / "episodes.csv") if (rd / "episodes.csv").exists() else {}
+    m = read_csv(rd / "metrics.csv") if (rd / "metrics.csv").exists() else {}
+    ev = read_csv(rd / "evals.csv") if (rd / "evals.csv").exists() else {}
+    fig, ax = plt.subplots(2, 3, figsize=(13, 7))
+    if ep.get("episode") is not None and len(ep["episode"]):
+        x = ep["episode"]
+        ax[0, 0].plot(x, ep["return"], ".", ms=1, alpha=0.3, color="grey")
+        ax[0, 0].plot(x, _running(ep["return"], 100), color="C0")
+        ax[0, 1].plot(x, _running(ep["landed"], 100), color="C1", label="training (eps-greedy)")
+        ax[1, 1].plot(x, ep["epsilon"], color="C3")
+    ax[0, 0].set(xlabel="episode", ylabel="return", title="training return (100-ep mean)")
+    ax[0, 1].set(xlabel="episode", ylabel="success rate", title="training success (100-ep)")
+    if m.get("updates") is not None and len(m["updates"]):
+        ax[1, 0].semilogy(m["updates"], np.abs(m["loss"]), label="total")
+        ax[1, 0].semilogy(m["updates"], np.abs(m["td_loss"]), label="TD")
+        if np.any(np.isfinite(m["margin_loss"])):
+            ax[1, 0].semilogy(m["updates"], np.abs(m["margin_loss"]), label="margin")
+        ax[1, 0].legend()
+    ax[1, 0].set(xlabel="gradient update", ylabel="loss", title="loss")
+    ax[1, 1].set(xlabel="episode", ylabel="epsilon", title="exploration")
+    if ev.get("wall_s") is not None and len(ev["wall_s"]):
+        mins = ev["wall_s"] / 60.0
+        ax[0, 2].plot(mins, ev["success_rate"], "o-", label="success")
+        ax[0, 2].plot(mins, ev["soft_landing_rate"], "s--", label="soft landing")
+        ax[0, 2].legend()
+        ax[1, 2].plot(mins, ev["fuel_median"], "o-", color="C2")
+    ax[0, 2].set(
+        xlabel="wall time (min)",
+        ylabel="rate",
+        title="greedy eval vs wall time",
+        ylim=(-0.02, 1.02),
+    )
+    ax[1, 2].set(xlabel="wall time (min)", ylabel="median fuel (kg)", title="greedy eval fuel")
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+    return Path(out)
+
+
+def _running(x: np.ndarray, n: int) -> np.ndarray:
+    c = np.cumsum(np.insert(np.asarray(x, float), 0, 0.0))
+    idx = np.arange(1, len(x) + 1)
+    lo = np.maximum(idx - n, 0)
+    return (c[idx] - c[lo]) / (idx - lo)
+
+
+def fig5_cumulative_successes(logs: dict[str, str | Path], out: str | Path) -> Path:
+    """Fig. 5: cumulative successful training episodes against episode, one line per run."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, path in logs.items():
+        ep = read_csv(path)
+        if ep and len(ep["episode"]):
+            ax.plot(ep["episode"], np.cumsum(ep["landed"]), label=name)
+    ax.set(xlabel="episode", ylabel="cumulative successful episodes", title="Fig. 5")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return Path(out)
+
+
+def fig6_trajectory(
+    states: np.ndarray, thrust_n: np.ndarray, dt_s: float, out: str | Path, title: str = ""
+) -> Path:
+    """Fig. 6: position, velocity and thrust against time of one episode."""
+    plt = _plt()
+    t = np.arange(len(states)) * dt_s
+    fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    names = ("i", "j", "k")
+    for k in range(3):
+        ax[0].plot(t, states[:, k], label=f"{names[k]}-position")
+        ax[1].plot(t, states[:, 3 + k], label=f"{names[k]}-velocity")
+        if len(thrust_n):
+            ax[2].step(t[:-1], thrust_n[:, k], where="post", label=f"T{k + 1}")
+    for a, y in zip(ax, ("position (m)", "velocity (m/s)", "thrust (N)"), strict=True):
+        a.axhline(0.0, color="grey", lw=0.8)
+        a.set_ylabel(y)
+        a.legend(fontsize=8)
+    ax[2].set_xlabel("time (s)")
+    ax[0].set_title(title or "Fig. 6: example trajectory")
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+    return Path(out)
+
+
+def fig7_final_distributions(finals: dict[str, np.ndarray], out: str | Path) -> Path:
+    """Fig. 7: histograms of final i/j/k position and velocity; one row per agent (each panel
+    has its own range, so a tight agent is not squashed by a scattered one)."""
+    plt = _plt()
+    n = len(finals)
+    fig, ax = plt.subplots(n, 6, figsize=(16, 2.4 * n + 0.6), squeeze=False)
+    labels = (
+        "i-position (m)",
+        "j-position (m)",
+        "k-position (m)",
+        "i-velocity (m/s)",
+        "j-velocity (m/s)",
+        "k-velocity (m/s)",
+    )
+    for r, (name, f) in enumerate(finals.items()):
+        for k in range(6):
+            ax[r, k].hist(f[:, k], bins=40, color=f"C{r}")
+            ax[r, k].set_xlabel(f"final {labels[k]}", fontsize=8)
+            ax[r, k].tick_params(labelsize=7)
+        ax[r, 0].set_ylabel(f"{name}\nepisodes", fontsize=8)
+    fig.suptitle("Fig. 7: distributions of final states")
+    fig.tight_layout()
+    fig.savefig(out, dpi=70)
+    plt.close(fig)
+    return Path(out)
+
+
+def fig8_initial_j_vs_final_i(
+    initial: np.ndarray, final: np.ndarray, out: str | Path, name: str = ""
+) -> Path:
+    """Fig. 8: initial j-position against final i-position."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.scatter(initial[:, 1], final[:, 0], s=4)
+    ax.set(
+        xlabel="initial j-position (m)",
+        ylabel="final i-position (m)",
+        title=f"Fig. 8 {name}".strip(),
+    )
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+    return Path(out)
+
+
+def success_vs_wall_time(runs: dict[str, str | Path], out: str | Path) -> Path:
+    """Greedy-eval success rate against wall time for several runs (from evals.csv)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, rd in runs.items():
+        ev = read_csv(Path(rd) / "evals.csv")
+        if ev and len(ev["wall_s"]):
+            ax.plot(ev["wall_s"] / 60.0, ev["success_rate"], "o-", ms=3, label=name)
+    ax.set(xlabel="wall time (min)", ylabel="success rate (greedy eval)", ylim=(-0.02, 1.02))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return Path(out)

@@ -1,0 +1,119 @@
+"""Training runs: repeatable for a seed, resumable, and better than a random policy."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from pd_core.dqn.config import TrainConfig, preset
+from pd_core.dqn.train import NetActor, Trainer, train
+from pd_core.evaluate import rollout, summarise
+
+torch.set_num_threads(1)
+
+
+def _small(tmp_path, name: str, **kw) -> TrainConfig:
+    base = dict(
+        hidden=(32, 32),
+        num_envs=4,
+        learning_starts=200,
+        batch_agent=16,
+        batch_demo=16,
+        demos="",
+        controller_demo_episodes=4,
+        pretrain_updates=20,
+        max_updates=120,
+        eval_every_s=0.0,
+        checkpoint_every_s=1e9,
+        progress=False,
+        run_dir=str(tmp_path / name),
+        buffer_size=5000,
+    )
+    base.update(kw)
+    return replace(preset("best"), **base)
+
+
+def _weights(tr: Trainer) -> list[torch.Tensor]:
+    return [v.clone() for v in tr.agent.q.state_dict().values()]
+
+
+def test_same_seed_same_weights_after_n_updates(tmp_path):
+    a = Trainer(_small(tmp_path, "a", seed=5), quiet=True)
+    a.run()
+    b = Trainer(_small(tmp_path, "b", seed=5), quiet=True)
+    b.run()
+    assert a.agent.updates == b.agent.updates == 120
+    for x, y in zip(_weights(a), _weights(b), strict=True):
+        assert torch.equal(x, y)
+    c = Trainer(_small(tmp_path, "c", seed=6), quiet=True)
+    c.run()
+    assert not all(torch.equal(x, y) for x, y in zip(_weights(a), _weights(c), strict=True))
+
+
+def test_resume_continues_exactly(tmp_path):
+    full = Trainer(_small(tmp_path, "full", seed=2, max_updates=160), quiet=True)
+    full.run()
+    half = Trainer(_small(tmp_path, "half", seed=2, max_updates=90), quiet=True)
+    half.run()
+    res = Trainer.resume(tmp_path / "half", {"max_updates": 160})
+    res.quiet = True
+    # restored: networks, optimiser, memories and schedules
+    assert res.agent.updates == 90 and len(res.replay) == len(half.replay)
+    assert res.c.episodes == half.c.episodes and res.pretrained == half.pretrained
+    np.testing.assert_array_equal(res.demo.obs, half.demo.obs)
+    res.run()
+    assert res.agent.updates == 160
+    for x, y in zip(_weights(full), _weights(res), strict=True):
+        assert torch.equal(x, y)
+    assert res.c.episodes == full.c.episodes and res.c.env_steps == full.c.env_steps
+
+
+def test_demo_memory_untouched_by_training(tmp_path):
+    tr = Trainer(_small(tmp_path, "d", seed=1), quiet=True)
+    before = (tr.demo.obs.copy(), tr.demo.actions.copy(), tr.demo.rewards.copy())
+    tr.run()
+    for x, y in zip(before, (tr.demo.obs, tr.demo.actions, tr.demo.rewards), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+class _Random:
+    def __init__(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        return self.rng.integers(0, 147, size=len(states))
+
+
+@pytest.mark.slow
+def test_short_training_beats_random_policy(tmp_path):
+    cfg = _small(
+        tmp_path,
+        "short",
+        seed=3,
+        hidden=(64, 64),
+        controller_demo_episodes=20,
+        pretrain_updates=600,
+        max_updates=700,
+        batch_agent=32,
+        batch_demo=32,
+        lr=1e-3,
+        input_norm_init=True,
+    )
+    out = train(cfg, quiet=True)
+    assert out["updates"] == 700
+    tr = Trainer.resume(tmp_path / "short")
+    trained = summarise(rollout(NetActor(tr.agent.q), 50, seed=123))
+    rand = summarise(rollout(_Random(0), 50, seed=123))
+    # a random policy spends its time far off the target velocity: much lower return
+    # a random policy hits the ground at ~ -86 m/s (median, 50 episodes); the seeded short run
+    # (700 updates, mostly imitation of the reference controller) brakes to about -35 m/s.
+    kv = trained["table7"]["k_velocity_mps"]["median"]
+    kv_rand = rand["table7"]["k_velocity_mps"]["median"]
+    assert kv > kv_rand + 25.0, (kv, kv_rand)
+    assert (
+        trained["table7"]["norm_ij_position_m"]["median"]
+        < 0.9 * (rand["table7"]["norm_ij_position_m"]["median"])
+    )
