@@ -111,7 +111,9 @@ class PolicyNode(Node):
 
         # Created after the model loaded: a publisher on /lander/thrust_cmd means "ready".
         self._cmd_pub = self.create_publisher(ThrustCommand, "/lander/thrust_cmd", CMD_PUB_QOS)
-        self.create_subscription(LanderState, "/lander/state", self._on_state, LOOP_QOS)
+        self._state_sub = self.create_subscription(
+            LanderState, "/lander/state", self._on_state, LOOP_QOS
+        )
         period = float(self.get_parameter("stats_period_s").value)
         if period > 0:
             self.create_timer(period, self._log_stats)
@@ -120,6 +122,14 @@ class PolicyNode(Node):
             f"policy ready: {self.model_path} (network {meta['network']['hidden']}, "
             f"{self.policy.actions.n} actions, code {meta.get('code_version', '?')})"
         )
+        # DDS discovery of the simulator takes a moment after start-up; say when it is done.
+        self._connect_timer = self.create_timer(0.05, self._check_connected)
+
+    def _check_connected(self) -> None:
+        n = self._state_sub.get_publisher_count()
+        if n > 0:
+            self.get_logger().info(f"policy connected: {n} publisher(s) of /lander/state matched")
+            self._connect_timer.cancel()
 
     def _on_state(self, msg: LanderState) -> None:
         t0 = time.perf_counter()

@@ -92,8 +92,9 @@ def test_policy_killed_and_restarted_control_resumes(stack, make_node, spin_unti
         "pd_policy_node", {"model_path": str(stack["model"])}, name="pd_policy_node_2"
     )
     stack["policy"] = new
-    assert spin_until(lambda: "policy ready" in new.log(), START_S), new.log()
-    ready_index = len(probe.states) - 1  # last state received when the node said ready
+    # Ready = model loaded and the simulator's publisher matched (DDS discovery done).
+    assert spin_until(lambda: "policy connected" in new.log(), START_S), new.log()
+    ready_index = len(probe.states) - 1  # last state received when the node was ready
     n_cmd = len(probe.commands)
     assert spin_until(lambda: len(probe.commands) > n_cmd, 5.0), "control did not resume"
     first = probe.commands[n_cmd][1]
