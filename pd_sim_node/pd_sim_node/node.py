@@ -162,8 +162,12 @@ class SimNode(Node):
 
         self._state_pub = self.create_publisher(LanderState, "/lander/state", STATE_PUB_QOS)
         self._episode_pub = self.create_publisher(EpisodeResult, "/lander/episode", EPISODE_QOS)
-        self.create_subscription(ThrustCommand, "/lander/thrust_cmd", self._on_command, LOOP_QOS)
+        self._cmd_sub = self.create_subscription(
+            ThrustCommand, "/lander/thrust_cmd", self._on_command, LOOP_QOS
+        )
         self.create_service(ResetEpisode, "/sim/reset", self._on_reset)
+        self._links = (-1, -1)
+        self.create_timer(0.1, self._log_links)
         if self.lockstep and self.resend_s > 0:
             self.create_timer(min(self.resend_s, 0.5) / 2, self._resend_check)
 
@@ -177,6 +181,16 @@ class SimNode(Node):
             state = np.asarray(init, dtype=float) if len(init) == 7 else None
             with self._lock:
                 self._start_episode(state, None)
+
+    def _log_links(self) -> None:
+        """Log when a policy (or monitor) joins or leaves: the matched DDS endpoints change."""
+        links = (self._state_pub.get_subscription_count(), self._cmd_sub.get_publisher_count())
+        if links != self._links:
+            self._links = links
+            self.get_logger().info(
+                f"links: {links[0]} subscriber(s) of /lander/state, "
+                f"{links[1]} publisher(s) of /lander/thrust_cmd"
+            )
 
     # ------------------------------------------------------------------ episodes
     def _start_episode(self, initial_state: np.ndarray | None, seed: int | None) -> int:

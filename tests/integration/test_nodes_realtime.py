@@ -2,11 +2,13 @@
 
 - /lander/state arrives at 5 Hz within 2 % over 10 s;
 - the policy node killed (SIGKILL) mid-flight and started again: the simulator keeps publishing
-  (holding the last command) and control resumes within two steps of the new node being ready.
+  (holding the last command) and control resumes within two steps of the new node being ready
+  (model loaded and DDS discovery done: the simulator and the probe have matched its endpoints).
 """
 
 from __future__ import annotations
 
+import re
 import signal
 import time
 
@@ -41,6 +43,26 @@ def stack(tmp_path_factory):
         yield {"procs": procs, "sim": sim, "policy": policy, "model": model}
     finally:
         procs.stop_all()
+
+
+LINKS = re.compile(r"links: (\d+) subscriber\(s\) of /lander/state, (\d+) publisher\(s\)")
+
+
+def links(sim) -> list[tuple[int, int]]:
+    """(state subscribers, command publishers) matched by the simulator, from its log."""
+    return [(int(a), int(b)) for a, b in LINKS.findall(sim.log())]
+
+
+def joined(history: list[tuple[int, int]], before: int) -> bool:
+    """Both counts rose at some point after the first `before` log lines."""
+    seq = history[max(before - 1, 0) :] if before else [(0, 0), *history]
+    pairs = list(zip(seq, seq[1:], strict=False))
+    return any(b[0] > a[0] for a, b in pairs) and any(b[1] > a[1] for a, b in pairs)
+
+
+def command_writer_gids(node) -> set[bytes]:
+    """The /lander/thrust_cmd publishers this node has discovered."""
+    return {bytes(i.endpoint_gid) for i in node.get_publishers_info_by_topic("/lander/thrust_cmd")}
 
 
 class Probe:
@@ -88,12 +110,22 @@ def test_policy_killed_and_restarted_control_resumes(stack, make_node, spin_unti
     assert len(probe.states) - n_state >= 6, "the simulator stopped publishing"
     assert len(probe.commands) - n_cmd <= 1  # at most one was already on its way
 
+    sim = stack["sim"]
+    before = len(links(sim))
+    # The killed node's endpoints stay in the graph until its DDS lease expires: tell the new
+    # node's command publisher apart by its gid.
+    old_gids = command_writer_gids(probe.node)
     new = stack["procs"].node(
         "pd_policy_node", {"model_path": str(stack["model"])}, name="pd_policy_node_2"
     )
     stack["policy"] = new
-    # Ready = model loaded and the simulator's publisher matched (DDS discovery done).
-    assert spin_until(lambda: "policy connected" in new.log(), START_S), new.log()
+    # Ready = model loaded and DDS matching done both ways: the simulator's state writer and
+    # command reader have matched the new node (the simulator logs its links), and our probe
+    # sees the node's command publisher.
+    assert spin_until(
+        lambda: joined(links(sim), before) and command_writer_gids(probe.node) - old_gids,
+        START_S,
+    ), sim.log() + new.log()
     ready_index = len(probe.states) - 1  # last state received when the node was ready
     n_cmd = len(probe.commands)
     assert spin_until(lambda: len(probe.commands) > n_cmd, 5.0), "control did not resume"
