@@ -38,6 +38,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from pd_core import ocp
+from pd_core.cli.node_help import node_help, wants_help
 from pd_core.config import OCP_CONTROL_POINTS
 from pd_interfaces.srv import ComputeTrajectory
 
@@ -254,7 +255,14 @@ class OcpNode(Node):
         self._pool = _solver_pool()
 
     def destroy_node(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        # Stop the solver process and join the pool's manager thread now: left to the
+        # interpreter's exit hook, it writes to a closed pipe and prints a traceback.
+        procs = list(getattr(self._pool, "_processes", {}).values())
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.join(timeout=2.0)
+        self._pool.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
     def _discretise(self, res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:
@@ -275,6 +283,10 @@ class OcpNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if args is None else args
+    if wants_help(argv):
+        print(node_help("pd_ocp_node", "pd_ocp_node", __doc__ or "", PARAMETERS))
+        return 0
     rclpy.init(args=args)
     node = None
     executor = None

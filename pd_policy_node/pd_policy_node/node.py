@@ -29,6 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 import pd_core
+from pd_core.cli.node_help import node_help, wants_help
 from pd_core.config import TABLE3
 from pd_core.policy import PolicyLoadError
 from pd_interfaces.msg import LanderState, ThrustCommand
@@ -177,6 +178,10 @@ class PolicyNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if args is None else args
+    if wants_help(argv):
+        print(node_help("pd_policy_node", "pd_policy_node", __doc__ or "", PARAMETERS))
+        return 0
     rclpy.init(args=args)
     node = None
     try:

@@ -29,6 +29,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from pd_core.cli.node_help import node_help, wants_help
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S
 from pd_core.sim import MISSING_COMMAND_MODES, FixedRateTicker, Simulator, percentiles_ms
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
@@ -342,6 +343,10 @@ class SimNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if args is None else args
+    if wants_help(argv):
+        print(node_help("pd_sim_node", "pd_sim_node", __doc__ or "", PARAMETERS))
+        return 0
     rclpy.init(args=args)
     node = None
     try:
