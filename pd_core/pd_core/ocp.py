@@ -181,13 +181,17 @@ class _Grid:
         Segment sums over the sorted left indices (no BLAS: tiny multithreaded BLAS calls are
         100x slower on a busy machine).
         """
-        a = (1.0 - self.w1).reshape((-1,) + (1,) * (v.ndim - 1)) * v
-        b = self.w1.reshape(a.shape[:1] + (1,) * (v.ndim - 1)) * v
+        shape = (-1,) + (1,) * (v.ndim - 1)
+        pad = np.zeros((1,) + v.shape[1:])
+        # A zero row at index n keeps every segment end in range: clipping the starts to n - 1
+        # instead would end the last non-empty segment one step early and drop the last
+        # (partial) step from the gradient of its two control points.
+        a = np.concatenate([(1.0 - self.w1).reshape(shape) * v, pad])
+        b = np.concatenate([self.w1.reshape(shape) * v, pad])
         n = len(self.dt)
-        st = np.minimum(self.starts, n - 1)
         empty = np.diff(np.append(self.starts, n)) == 0
-        sa = np.add.reduceat(a, st, axis=0)
-        sb = np.add.reduceat(b, st, axis=0)
+        sa = np.add.reduceat(a, self.starts, axis=0)
+        sb = np.add.reduceat(b, self.starts, axis=0)
         sa[empty] = 0.0
         sb[empty] = 0.0
         out = sa
