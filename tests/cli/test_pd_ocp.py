@@ -66,3 +66,14 @@ def test_bad_request_exits_2(capsys: pytest.CaptureFixture) -> None:
 def test_help() -> None:
     for args in (["--help"], ["solve", "--help"], ["demos", "--help"]):
         assert run(*args).returncode == 0
+
+
+def test_paper_flag_runs_finite_difference_slsqp_to_the_same_optimum(capsys) -> None:
+    state = ["--position", "750", "0", "2500", "--velocity", "-40", "0", "-80", "--mass", "2000"]
+    assert main(["solve", *state, "--json", "--paper"]) == 0
+    paper = json.loads(capsys.readouterr().out)
+    assert main(["solve", *state, "--json"]) == 0
+    fast = json.loads(capsys.readouterr().out)
+    assert paper["method"] == "slsqp" and fast["method"] == "qp"
+    assert paper["success"] and paper["iterations"] > fast["iterations"]
+    assert paper["cost"] == pytest.approx(fast["cost"], rel=5e-3)

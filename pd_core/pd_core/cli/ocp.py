@@ -81,14 +81,21 @@ def _print_side_by_side(title: str, ours: dict, paper: dict) -> None:
         print(f"{k:<22}{' / '.join(f'{x:.3g}' for x in v):>36}   {ps}")
 
 
+def _solver_options(args: argparse.Namespace) -> dict[str, Any]:
+    """method (+ options): --paper is SciPy SLSQP with finite-difference gradients (Sec. 3.1)."""
+    if args.paper:
+        return {"method": "slsqp", "exact_gradients": False}
+    return {"method": args.method}
+
+
 def _solve(args: argparse.Namespace) -> int:
     r = ocp.solve(
         args.position,
         args.velocity,
         args.mass,
-        method=args.method,
         objective=args.objective,
         n_control=args.control_points,
+        **_solver_options(args),
     )
     out = {
         "success": r.success,
@@ -119,7 +126,7 @@ def _demos(args: argparse.Namespace) -> int:
     states = demos_mod.table1_initial_states()
     quiet = args.json
     results = [
-        ocp.solve(s[0:3], s[3:6], s[6], method=args.method)
+        ocp.solve(s[0:3], s[3:6], s[6], **_solver_options(args))
         for s in tqdm(states, desc="Table 1 OCP solves", disable=quiet)
     ]
     ok = [r for r in results if r.success]
@@ -135,14 +142,14 @@ def _demos(args: argparse.Namespace) -> int:
         rng = np.random.default_rng(args.seed)
         extra = rng.uniform(TABLE3.lo, TABLE3.hi, size=(args.extra, 7))
         ex = [
-            ocp.solve(s[0:3], s[3:6], s[6], method=args.method)
+            ocp.solve(s[0:3], s[3:6], s[6], **_solver_options(args))
             for s in tqdm(extra, desc="Table 3 extra solves", disable=quiet)
         ]
         all_runs += disc.discretise_batch([r for r in ex if r.success], N_ACTIONS_PER_AXIS)
     demos = demos_mod.runs_to_demos(all_runs)
     meta = {
         "made_by": "pd-ocp demos",
-        "method": args.method,
+        "method": "slsqp (finite differences, the paper's)" if args.paper else args.method,
         "objective": "energy",
         "initial_states": "Table 1 (33 cases)"
         + (f" + {args.extra} uniform Table 3" if args.extra else ""),
@@ -188,13 +195,28 @@ def build_parser() -> argparse.ArgumentParser:
         "--velocity", type=float, nargs=3, required=True, metavar=("VX", "VY", "VZ"), help="m/s"
     )
     s.add_argument("--mass", type=float, required=True, help="kg")
-    s.add_argument("--method", choices=ocp.METHODS, default=ocp.DEFAULT_METHOD)
+    s.add_argument(
+        "--method",
+        choices=ocp.METHODS,
+        default=ocp.DEFAULT_METHOD,
+        help="qp: fast structured solver (default); slsqp: SciPy SLSQP with exact gradients",
+    )
+    s.add_argument(
+        "--paper",
+        action="store_true",
+        help="the paper's solver: SciPy SLSQP, finite-difference gradients (about 9 s a case)",
+    )
     s.add_argument("--objective", choices=ocp.OBJECTIVES, default="energy")
     s.add_argument("--control-points", type=int, default=80)
     s.add_argument("--json", action="store_true", help="print one JSON object")
     d = sub.add_parser("demos", help="Tables 4-6 and the demonstration file")
     d.add_argument("--out", default="data/demos_7x7x3.npz")
     d.add_argument("--method", choices=ocp.METHODS, default=ocp.DEFAULT_METHOD)
+    d.add_argument(
+        "--paper",
+        action="store_true",
+        help="the paper's solver: SciPy SLSQP, finite-difference gradients (about 9 s a case)",
+    )
     d.add_argument("--extra", type=int, default=0, help="add N uniform Table 3 initial states")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--skip-table5", action="store_true")
