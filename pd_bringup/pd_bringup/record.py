@@ -88,6 +88,8 @@ class Recorder(Node):
         def write(raw: bytes) -> None:
             self.writer.write(conn, time.time_ns(), raw)
             self.counts[topic] += 1
+            if self.counts[topic] == 1:
+                self.get_logger().info(f"first message on {topic}")
 
         return write
 
