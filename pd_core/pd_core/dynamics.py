@@ -35,9 +35,9 @@ def _horner(coeffs: tuple[float, ...], z: np.ndarray) -> np.ndarray:
     return out
 
 
-def mass_flow_kgps(thrust_n: np.ndarray) -> np.ndarray:
-    """Fuel mass flow of Eq. 3 (kg/s), positive; thrust_n (..., 3) in N."""
-    return np.abs(thrust_n).sum(axis=-1) / (ISP_S * G0_MPS2)
+def mass_flow_kgps(thrust_n: np.ndarray, isp_s: float | np.ndarray = ISP_S) -> np.ndarray:
+    """Fuel mass flow of Eq. 3 (kg/s), positive; thrust_n (..., 3) in N, isp_s in s (or (...,))."""
+    return np.abs(thrust_n).sum(axis=-1) / (isp_s * G0_MPS2)
 
 
 def derivatives(state: np.ndarray, thrust_n: np.ndarray, force_n: np.ndarray) -> np.ndarray:
@@ -55,8 +55,11 @@ def step(
     force_n: np.ndarray,
     dt_s: float | np.ndarray,
     dry_mass_kg: float = DRY_MASS_KG,
+    isp_s: float | np.ndarray = ISP_S,
 ) -> np.ndarray:
     """Advance states (..., 7) by dt_s under constant thrust (..., 3) and disturbance (..., 3), N.
+
+    `isp_s` (s, scalar or per lander (...,)) sets the mass flow of Eq. 3; dispersions vary it.
 
     Engines cannot burn below `dry_mass_kg`: a step that would is flown at the reduced thrust
     that ends it exactly at dry mass (same impulse direction, same fuel accounting), and a dry
@@ -64,7 +67,7 @@ def step(
     """
     m0 = state[..., 6]
     dt = np.asarray(dt_s, dtype=float)
-    mdot = mass_flow_kgps(thrust_n)
+    mdot = mass_flow_kgps(thrust_n, isp_s)
     burn = mdot * dt
     fuel_left = np.maximum(m0 - dry_mass_kg, 0.0)
     if np.any(burn > fuel_left):
