@@ -2,9 +2,13 @@
 
 `Simulator` wraps `PoweredDescentEnv` the way pd_sim_node drives it: episodes are numbered from 1,
 each step waits for a thrust command that names the episode and step it answers, and a command is
-applied only if it is valid for the step being flown. Anything else is rejected with a reason,
-counted, and never applied. When a step has to be flown without a fresh command, the last applied
-command is held (`missing_command="hold"`) or zero thrust is used (`"zero"`).
+applied only if it is valid for the step being flown and is the first valid one for that step
+(a second command for an answered step, from a second policy node or a stray publisher, is
+rejected as a "conflict", or a "duplicate" when it repeats the first). Anything else is rejected
+with a reason, counted, and never applied. An initial state is accepted only if the OCP would
+take it (`pd_core.ocp.check_request`: above ground, above the dry mass, plausible magnitudes).
+When a step has to be flown without a fresh command, the last applied command is held
+(`missing_command="hold"`) or zero thrust is used (`"zero"`).
 
 Flying the same seed, initial state and actions through `Simulator` and through
 `PoweredDescentEnv` gives bit-identical states: `Simulator.advance` calls `env.step(action)`.
@@ -28,7 +32,7 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, StateRange
 from pd_core.env import PoweredDescentEnv, Status
-from pd_core.state import check_state
+from pd_core.ocp import check_request
 
 MISSING_COMMAND_MODES = ("hold", "zero")
 
@@ -84,7 +88,8 @@ def check_command(
     kinds: "action" (unknown action), "thrust" (NaN/infinite or not the action's thrust),
     "stale" (answers an earlier step or episode), "ahead" (answers a step not flown yet),
     "idle" (no episode is running). Content is checked before timing, so a malformed command
-    is reported as malformed even when it is also late.
+    is reported as malformed even when it is also late. (`Simulator.submit` adds "conflict" and
+    "duplicate": the step was answered already.)
     """
     a = cmd.action
     if isinstance(a, bool) or not isinstance(a, (int, np.integer)) or not 0 <= a < actions.n:
@@ -110,6 +115,27 @@ def check_command(
             f"(episode {episode} step {step})"
         )
     return None
+
+
+def answered_already(first: Command | None, cmd: Command) -> tuple[str, str]:
+    """(kind, message) rejecting `cmd` for a step that `first` answered already."""
+    a = first.action if first is not None else None
+    kind = "duplicate" if a == cmd.action else "conflict"
+    return kind, (
+        f"episode {cmd.episode} step {cmd.step} was answered already (action {a}); "
+        f"a later command with action {cmd.action} is not flown (first command wins)"
+    )
+
+
+def check_initial_state(state: np.ndarray) -> np.ndarray:
+    """A float (7,) copy of an initial state the lander can fly from, else ValueError why not."""
+    s = np.asarray(state, dtype=float)
+    if s.shape != (7,):
+        raise ValueError(f"state must have 7 entries [x, y, z, vx, vy, vz, m], got shape {s.shape}")
+    why = check_request(s[0:3], s[3:6], s[6])
+    if why is not None:
+        raise ValueError(why)
+    return s.copy()
 
 
 def describe_end(status: Status, state: np.ndarray, time_s: float) -> str:
@@ -208,7 +234,7 @@ class Simulator:
         (the running episode then goes on untouched).
         """
         if initial_state is not None:
-            initial_state = check_state(initial_state).reshape(7)
+            initial_state = check_initial_state(initial_state)
         if seed is not None and seed < 0:
             raise ValueError(f"seed must be >= 0 or None, got {seed}")
         interrupted = self._finish(Status.FLYING) if self.flying else None
@@ -233,6 +259,8 @@ class Simulator:
         """Validate and store a command for the current step; None or (kind, reason) if rejected."""
         where = (self.episode, self.step) if self.flying else (None, None)
         err = check_command(cmd, *where, actions=self.actions)
+        if err is None and self.has_fresh_command:
+            err = answered_already(self._pending, cmd)
         if err is not None:
             self.counters.rejected_commands += 1
             by = self.counters.rejected_by_reason
@@ -240,7 +268,7 @@ class Simulator:
             if self.flying:
                 self._ep_rejected += 1
             return err
-        self._pending = cmd  # the latest valid command for this step wins
+        self._pending = cmd  # the first valid command for this step wins
         self.counters.accepted_commands += 1
         return None
 

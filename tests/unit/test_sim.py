@@ -154,12 +154,38 @@ def test_rejected_commands_are_counted_and_never_applied():
     assert result["missed_commands"] == 1
 
 
-def test_latest_valid_command_wins():
+def test_first_valid_command_wins_later_ones_rejected_and_counted():
     sim = Simulator()
     sim.reset(seed=0)
-    sim.submit(cmd(1, 0, 3))
-    sim.submit(cmd(1, 0, HOVER))
+    assert sim.submit(cmd(1, 0, 3)) is None
+    kind, why = sim.submit(cmd(1, 0, HOVER))
+    assert kind == "conflict" and "first command wins" in why and f"action {HOVER}" in why
+    assert sim.submit(cmd(1, 0, 3))[0] == "duplicate"
+    assert sim.advance().action == 3
+    assert sim.counters.rejected_by_reason == {"conflict": 1, "duplicate": 1}
+    # an invalid command never blocks the valid one that follows it
+    assert sim.submit(cmd(1, 1, 500, (0.0, 0.0, 0.0)))[0] == "action"
+    assert sim.submit(cmd(1, 1, HOVER)) is None
     assert sim.advance().action == HOVER
+    assert sim.reset()[2]["rejected_commands"] == 3
+
+
+@pytest.mark.parametrize(
+    ("state", "says"),
+    [
+        ([0, 0, 0.0, 0, 0, -10, 1900], "altitude"),
+        ([0, 0, -100.0, 0, 0, -10, 1900], "altitude"),
+        ([0, 0, 1500, 0, 0, -10, 500.0], "dry mass"),
+        ([0, 0, 1500, 0, 0, -10, 1000.0], "dry mass"),
+        ([0, 0, 1500, 0, 0], "7 entries"),
+    ],
+)
+def test_reset_refuses_states_the_lander_cannot_fly_from(state, says):
+    sim = Simulator(seed=1)
+    sim.reset()
+    with pytest.raises(ValueError, match=says):
+        sim.reset(initial_state=state)
+    assert (sim.episode, sim.flying) == (1, True)
 
 
 @pytest.mark.parametrize(("mode", "expected"), [("hold", HOVER), ("zero", None)])
