@@ -7,6 +7,7 @@ of a state at the time limit is still bootstrapped by learners.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import IntEnum
 from typing import Any, ClassVar
 
@@ -19,12 +20,20 @@ from pd_core import dynamics
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.config import (
     DT_S,
+    ISP_S,
     MAX_EPISODE_TIME_S,
     REWARD,
     STATE_SCALE,
     TABLE3,
     RewardConfig,
     StateRange,
+)
+from pd_core.dispersions import (
+    NOMINAL,
+    DispersionArrays,
+    Dispersions,
+    draw_episode,
+    load_scenarios,
 )
 from pd_core.disturbance import force_at, sample_knots
 from pd_core.reward import landed as landed_condition
@@ -49,12 +58,18 @@ def transition(
     dt_s: float = DT_S,
     reward_cfg: RewardConfig = REWARD,
     thrust_max_n: np.ndarray | None = None,
+    *,
+    plant_thrust_n: np.ndarray | None = None,
+    isp_s: float | np.ndarray = ISP_S,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One environment step for states (..., 7): (next_state, reward, terminated, landed).
 
     The single env, the vector env, the demonstrations and the simulator node all call this.
+    Under dispersions the plant flies `plant_thrust_n` (the delivered thrust) with specific
+    impulse `isp_s`; the reward's control effort is always that of the command `thrust_n`.
     """
-    nxt = dynamics.step(state, thrust_n, force_n, dt_s)
+    plant = thrust_n if plant_thrust_n is None else plant_thrust_n
+    nxt = dynamics.step(state, plant, force_n, dt_s, isp_s=isp_s)
     pos, vel = nxt[..., 0:3], nxt[..., 3:6]
     ok = landed_condition(pos, vel, reward_cfg)
     r = shaped_reward(pos, vel, thrust_n, reward_cfg, thrust_max_n, ok)
@@ -202,11 +217,19 @@ class PoweredDescentEnv(gym.Env):
 
 
 class PoweredDescentVectorEnv:
-    """N independent landers stepped together by `transition`; same-step autoreset.
+    """N independent landers stepped together by `transition`.
 
     Sub-env i seeded with `seed + i` flies exactly what `PoweredDescentEnv` seeded with `seed + i`
-    flies. When an episode ends its final observation/state are in `info["final_obs"]` /
-    `info["final_state"]` and the returned observation is already the next episode's first.
+    flies (nominal dispersions). With `autoreset` (training) an ended episode restarts in the same
+    step: its final observation/state are in `info["final_obs"]` / `info["final_state"]` and the
+    returned observation is already the next episode's first. Without it (evaluation) `reset`
+    starts a fixed set of episodes, one per sub-env: an ended sub-env is frozen (no longer
+    stepped, reward 0, `active` False) until the next `reset`, so `while env.active.any()` flies
+    exactly those episodes.
+
+    `dispersions` (one `Dispersions`, or several: each episode then picks one uniformly) are off
+    by default. Observations are of the state the agent observes (`observed_states`: the true
+    state plus the episode's navigation noise); `states` and `info["state"]` are true states.
     """
 
     def __init__(
@@ -219,6 +242,8 @@ class PoweredDescentVectorEnv:
         reward_cfg: RewardConfig = REWARD,
         dt_s: float = DT_S,
         autoreset: bool = True,
+        *,
+        dispersions: Dispersions | Sequence[Dispersions] = NOMINAL,
     ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -232,6 +257,12 @@ class PoweredDescentVectorEnv:
         self.autoreset = autoreset
         self.single_action_space = spaces.Discrete(actions.n)
         self.single_observation_space = _OBS_SPACE
+        scen = (dispersions,) if isinstance(dispersions, Dispersions) else tuple(dispersions)
+        if not scen:
+            raise ValueError("dispersions: give at least one scenario")
+        self.scenarios = scen
+        self._boxes = [d.initial_box(initial_range) for d in scen]
+        self._nominal = all(d.nominal for d in scen)
         self._rngs = [np_random(None)[0] for _ in range(num_envs)]
         self._duration = self.max_steps * dt_s
         k = sample_knots(self._rngs[0], self._duration).shape[0]
@@ -239,21 +270,44 @@ class PoweredDescentVectorEnv:
         self.states = np.zeros((num_envs, 7))
         self.initial_states = np.zeros((num_envs, 7))
         self.steps = np.zeros(num_envs, dtype=np.int64)
+        self._active = np.ones(num_envs, dtype=bool)
         self._thrust_max = actions.limits.hi
+        self._disp = DispersionArrays(num_envs, scen, self.max_steps)
+
+    @property
+    def active(self) -> np.ndarray:
+        """(N,) bool: sub-envs whose episode is still flying (always True with autoreset)."""
+        return self._active.copy()
+
+    @property
+    def observed_states(self) -> np.ndarray:
+        """(N, 7) the physical states the agent observes (true states plus navigation noise)."""
+        return self._disp.observed(self.states, self.steps)
 
     def _reset_one(self, i: int, initial_state: np.ndarray | None) -> None:
         rng = self._rngs[i]
+        k = 0 if len(self.scenarios) == 1 else int(rng.integers(len(self.scenarios)))
+        d = self.scenarios[k]
         if initial_state is None:
-            self.states[i] = sample_initial_state(rng, self.initial_range)
+            self.states[i] = sample_initial_state(rng, self._boxes[k])
         else:
             self.states[i] = check_state(initial_state)
-        self.initial_states[i] = self.states[i]
-        self._knots[i] = sample_knots(rng, self._duration)
+        knots = sample_knots(rng, self._duration)
+        self._knots[i] = knots if d.disturbance_scale == 1.0 else knots * d.disturbance_scale
         self.steps[i] = 0
+        self._active[i] = True
+        if not self._nominal:
+            dr = draw_episode(rng, d, self.max_steps)
+            if dr.mass_kg is not None and initial_state is None:
+                self.states[i, 6] = dr.mass_kg
+            self._disp.set_episode(i, k, d, dr)
+        self.initial_states[i] = self.states[i]
 
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start every sub-env; `seed` s gives sub-env i the seed s + i (or a list of seeds);
+        options={"initial_state": (N, 7)} starts from given states."""
         if seed is not None:
             seeds = [seed + i for i in range(self.num_envs)] if np.isscalar(seed) else list(seed)
             if len(seeds) != self.num_envs:
@@ -262,7 +316,31 @@ class PoweredDescentVectorEnv:
         init = (options or {}).get("initial_state")
         for i in range(self.num_envs):
             self._reset_one(i, None if init is None else np.asarray(init, dtype=float)[i])
-        return scale_state(self.states), {"state": self.states.copy()}
+        observed = self.observed_states
+        return scale_state(observed), {"state": self.states.copy(), "observed_state": observed}
+
+    def _transition(
+        self, idx: np.ndarray | slice, thrust: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`transition` for the sub-envs `idx` under their dispersions."""
+        states, steps = self.states[idx], self.steps[idx]
+        if self.disturbance:
+            force = force_at(self._knots[idx], (steps + 0.5) * self.dt_s)
+        else:
+            force = np.zeros_like(thrust)
+        if self._nominal:
+            return transition(states, thrust, force, self.dt_s, self.reward_cfg, self._thrust_max)
+        plant, isp = self._disp.plant(idx, thrust)
+        return transition(
+            states,
+            thrust,
+            force,
+            self.dt_s,
+            self.reward_cfg,
+            self._thrust_max,
+            plant_thrust_n=plant,
+            isp_s=isp,
+        )
 
     def step(
         self, actions: np.ndarray
@@ -271,29 +349,99 @@ class PoweredDescentVectorEnv:
         if actions.shape != (self.num_envs,):
             raise ValueError(f"need actions of shape ({self.num_envs},), got {actions.shape}")
         thrust = self.actions.thrust(actions)
-        if self.disturbance:
-            force = force_at(self._knots, (self.steps + 0.5) * self.dt_s)
-        else:
-            force = np.zeros_like(thrust)
-        nxt, r, term, ok = transition(
-            self.states, thrust, force, self.dt_s, self.reward_cfg, self._thrust_max
+        n = self.num_envs
+        idx: np.ndarray | slice = (
+            slice(None) if self._active.all() else np.flatnonzero(self._active)
         )
-        self.states = nxt
-        self.steps += 1
-        trunc = ~term & (self.steps >= self.max_steps)
+        nxt, r_live, term_live, ok_live = self._transition(idx, thrust[idx])
+        self.states[idx] = nxt
+        self.steps[idx] += 1
+        r, term, ok = np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        r[idx], term[idx], ok[idx] = r_live, term_live, ok_live
+        trunc = ~term & (self.steps >= self.max_steps) & self._active
         done = term | trunc
         info: dict[str, Any] = {
-            "state": nxt.copy(),
+            "state": self.states.copy(),
             "landed": ok & term,
-            "fuel_kg": self.initial_states[:, 6] - nxt[:, 6],
+            "fuel_kg": self.initial_states[:, 6] - self.states[:, 6],
             "steps": self.steps.copy(),
             "initial_state": self.initial_states.copy(),
         }
-        obs = scale_state(nxt)
+        if not self.autoreset:
+            self._active &= ~done
+            info["active"] = self._active.copy()
+        observed = self.observed_states
+        obs = scale_state(observed)
         if self.autoreset and np.any(done):
             info["final_obs"] = obs.copy()
-            info["final_state"] = nxt.copy()
+            info["final_state"] = info["state"].copy()
+            info["final_observed_state"] = observed.copy()
             for i in np.flatnonzero(done):
                 self._reset_one(int(i), None)
-            obs[done] = scale_state(self.states[done])
+            observed = self.observed_states
+            obs[done] = scale_state(observed[done])
+        info["observed_state"] = observed
         return obs, r, term, trunc, info
+
+    # ---- checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to continue exactly: numpy arrays, plus `rngs` (the per-env
+        Generator states, JSON-serialisable dicts) and `scenarios` (their field dicts)."""
+        d: dict[str, Any] = {
+            "states": self.states.copy(),
+            "initial_states": self.initial_states.copy(),
+            "steps": self.steps.copy(),
+            "active": self._active.copy(),
+            "knots": self._knots.copy(),
+            "rngs": [r.bit_generator.state for r in self._rngs],
+            "scenarios": [s.to_dict() for s in self.scenarios],
+        }
+        d.update(self._disp.state_dict())
+        return d
+
+    def load_state_dict(self, d: dict[str, Any]) -> None:
+        """Restore `state_dict()` of an env made with the same arguments (ValueError if not)."""
+        mine = [s.to_dict() for s in self.scenarios]
+        if list(d.get("scenarios", mine)) != mine:
+            raise ValueError(f"env state has dispersions {d['scenarios']}, this env {mine}")
+        if len(d["rngs"]) != self.num_envs or np.shape(d["states"]) != self.states.shape:
+            raise ValueError(
+                f"env state is for {len(d['rngs'])} envs, this env has {self.num_envs}"
+            )
+        self.states = np.array(d["states"], dtype=float)
+        self.initial_states = np.array(d["initial_states"], dtype=float)
+        self.steps = np.array(d["steps"], dtype=np.int64)
+        self._active = np.array(d.get("active", np.ones(self.num_envs)), dtype=bool)
+        self._knots = np.array(d["knots"], dtype=float)
+        for r, s in zip(self._rngs, d["rngs"], strict=True):
+            r.bit_generator.state = s
+        self._disp.load_state_dict(d)
+
+
+def make_vector_env(
+    num_envs: int,
+    disturbance: bool = True,
+    max_time_s: float = MAX_EPISODE_TIME_S,
+    reward_cfg: RewardConfig = REWARD,
+    autoreset: bool = True,
+    *,
+    dispersions: str | Dispersions | Sequence[Dispersions] = "",
+    initial_range: StateRange = TABLE3,
+) -> PoweredDescentVectorEnv:
+    """The env factory shared by training and evaluation (Table 3, disturbances on).
+
+    `dispersions`: "" (nominal), a scenario name, a comma-separated list, a campaign name or a
+    YAML file (`pd_core.dispersions.load_scenarios`), or Dispersions objects. With several
+    scenarios each episode picks one (domain randomisation).
+    """
+    if isinstance(dispersions, str):
+        dispersions = load_scenarios(dispersions) if dispersions.strip() else NOMINAL
+    return PoweredDescentVectorEnv(
+        num_envs,
+        disturbance=disturbance,
+        max_time_s=max_time_s,
+        initial_range=initial_range,
+        reward_cfg=reward_cfg,
+        autoreset=autoreset,
+        dispersions=dispersions,
+    )

@@ -2,19 +2,22 @@
 
 Episode i of an evaluation with seed s flies exactly what `PoweredDescentEnv` seeded with s + i
 flies (the vector env's guarantee), with disturbances on, greedy actions, the same env factory as
-training (`pd_core.dqn.train.make_vector_env`).
+training (`pd_core.env.make_vector_env`), optionally under dispersions (`pd_core.dispersions`).
+Nothing here imports torch: an actor is anything with `act_batch(states (B, 7)) -> (B,)`.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from pd_core.config import MAX_EPISODE_TIME_S, PAPER_TABLE7, REWARD, RewardConfig
-from pd_core.env import PoweredDescentVectorEnv
+from pd_core.dispersions import Dispersions
+from pd_core.env import PoweredDescentVectorEnv, make_vector_env
 
 QUANTITIES = ("norm_ij_position_m", "norm_ij_velocity_mps", "k_velocity_mps", "fuel_kg")
 LABELS = {
@@ -24,6 +27,8 @@ LABELS = {
     "fuel_kg": "Fuel (kg)",
 }
 SOFT_K_VELOCITY_MPS = -2.0  # soft landing: k-velocity at touchdown above this
+# episodes flown at once by `rollout`; campaigns split on multiples of it (see `rollout`)
+CHUNK_EPISODES = 1024
 
 
 class Actor(Protocol):
@@ -48,6 +53,17 @@ class Rollouts:
         return self.initial_states[:, 6] - self.final_states[:, 6]
 
 
+def concat_rollouts(parts: Sequence[Rollouts]) -> Rollouts:
+    """Rollouts of consecutive episode ranges, in order, as one."""
+    cat = [np.concatenate([getattr(p, f) for p in parts]) for f in _ARRAY_FIELDS]
+    paths = [t for p in parts for t in p.trajectories]
+    acts = [a for p in parts for a in p.actions]
+    return Rollouts(*cat, paths, acts)
+
+
+_ARRAY_FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
+
+
 def rollout(
     actor: Actor,
     n_episodes: int,
@@ -57,56 +73,76 @@ def rollout(
     reward_cfg: RewardConfig = REWARD,
     keep_trajectories: int = 0,
     initial_states: np.ndarray | None = None,
+    *,
+    dispersions: str | Dispersions | Sequence[Dispersions] = "",
+    chunk: int = CHUNK_EPISODES,
 ) -> Rollouts:
-    """Fly n_episodes greedy episodes at once; keep the first `keep_trajectories` paths."""
-    from pd_core.dqn.train import make_vector_env
+    """Fly episodes 0..n_episodes-1 (episode i: env seed seed + i) with greedy actions.
 
-    env = make_vector_env(
-        n_episodes, disturbance=disturbance, max_time_s=max_time_s, reward_cfg=reward_cfg
-    )
-    env.autoreset = False
+    Episodes are flown `chunk` at a time in one vector env (memory stays bounded for 10^6
+    episodes); the result does not depend on how the caller splits a campaign as long as the
+    split falls on multiples of `chunk` (then every chunk is the same batch). Keeps the states
+    and actions of the first `keep_trajectories` episodes.
+    """
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    env = None
+    parts = []
+    for start in range(0, n_episodes, chunk):
+        n = min(chunk, n_episodes - start)
+        if env is None or env.num_envs != n:
+            env = make_vector_env(
+                n,
+                disturbance=disturbance,
+                max_time_s=max_time_s,
+                reward_cfg=reward_cfg,
+                autoreset=False,
+                dispersions=dispersions,
+            )
+        init = None if initial_states is None else initial_states[start : start + n]
+        keep = max(0, min(keep_trajectories - start, n))
+        parts.append(fly_episodes(actor, env, seed + start, init, keep))
+    return concat_rollouts(parts)
+
+
+def fly_episodes(
+    actor: Actor,
+    env: PoweredDescentVectorEnv,
+    seed: int,
+    initial_states: np.ndarray | None = None,
+    keep_trajectories: int = 0,
+) -> Rollouts:
+    """Fly one episode in each sub-env of `env` (made with autoreset=False), sub-env i with
+    seed seed + i; the actor sees the observed states of the landers still flying."""
     opts = None if initial_states is None else {"initial_state": initial_states}
     _, info = env.reset(seed=seed, options=opts)
-    states = info["state"]
-    n = n_episodes
-    done = np.zeros(n, dtype=bool)
-    final = states.copy()
-    landed = np.zeros(n, dtype=bool)
+    n = env.num_envs
+    init = info["state"].copy()
     term = np.zeros(n, dtype=bool)
-    steps = np.zeros(n, dtype=np.int64)
+    landed = np.zeros(n, dtype=bool)
     ret = np.zeros(n)
     k = min(keep_trajectories, n)
-    paths: list[list[np.ndarray]] = [[states[i].copy()] for i in range(k)]
+    paths: list[list[np.ndarray]] = [[init[i].copy()] for i in range(k)]
     acts: list[list[int]] = [[] for _ in range(k)]
-    init = states.copy()
-    while not done.all():
-        a = np.asarray(actor.act_batch(states), dtype=np.int64)
-        _, r, te, tr, info = env.step(a)
-        live = ~done
-        ret[live] += r[live]
-        states = info["state"]
-        for i in range(k):
-            if live[i]:
-                paths[i].append(states[i].copy())
-                acts[i].append(int(a[i]))
-        ended = live & (te | tr)
-        final[ended] = states[ended]
-        landed[ended] = info["landed"][ended]
-        term[ended] = te[ended]
-        steps[ended] = info["steps"][ended]
-        done |= ended
-        if not live.any():
-            break
-        # finished landers keep stepping in the env; only `live` entries are read.
-        states = np.where(done[:, None], init, states)
-        env.states = np.where(done[:, None], init, env.states)
-        env.steps = np.where(done, 0, env.steps)
+    observed = info["observed_state"]
+    active = env.active
+    actions = np.zeros(n, dtype=np.int64)
+    while active.any():
+        actions[active] = actor.act_batch(observed[active])
+        _, r, te, _, info = env.step(actions)
+        ret += r
+        term |= te
+        landed |= info["landed"]
+        for i in np.flatnonzero(active[:k]):
+            paths[i].append(info["state"][i].copy())
+            acts[i].append(int(actions[i]))
+        observed, active = info["observed_state"], info["active"]
     return Rollouts(
         init,
-        final,
+        info["state"].copy(),
         landed,
         term,
-        steps,
+        env.steps.copy(),
         ret,
         [np.array(p) for p in paths],
         [np.array(a, dtype=np.int64) for a in acts],
@@ -155,7 +191,7 @@ def fuel_optimal_ratios(ro: Rollouts, subset: int) -> dict[str, Any]:
     misses rest at the pad" by centimetres) are kept and counted in `inexact_solves`; solves
     without a fuel figure are skipped and counted in `failed_solves`.
     """
-    try:
+    try:  # the OCP (scipy) is only needed for this comparison
         from pd_core import ocp
         from pd_core.config import RL_THRUST
     except ImportError as exc:
@@ -241,8 +277,10 @@ def _json_default(o: Any) -> Any:
 
 
 __all__ = [
-    "PoweredDescentVectorEnv",
+    "CHUNK_EPISODES",
     "Rollouts",
+    "concat_rollouts",
+    "fly_episodes",
     "final_quantities",
     "format_report",
     "fuel_optimal_ratios",

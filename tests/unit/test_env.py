@@ -6,7 +6,7 @@ from gymnasium.utils.env_checker import check_env
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST, STATE_SCALE, TABLE3
-from pd_core.env import PoweredDescentEnv, PoweredDescentVectorEnv, Status
+from pd_core.env import PoweredDescentEnv, PoweredDescentVectorEnv, Status, make_vector_env
 from pd_core.state import check_state
 
 START = [600.0, -200.0, 2500.0, -40.0, 10.0, -80.0, 2000.0]
@@ -76,8 +76,12 @@ def test_vector_env_equals_single_envs_with_same_seeds():
     rng = np.random.default_rng(0)
     for _ in range(250):
         a = rng.integers(0, 147, n)
+        live = venv.active
         _, vr, vterm, _, vinfo = venv.step(a)
         for i, e in enumerate(envs):
+            if not live[i]:  # an ended sub-env is frozen until the next reset
+                assert vr[i] == 0.0 and not vterm[i]
+                continue
             _, r, term, _, info = e.step(int(a[i]))
             np.testing.assert_allclose(vinfo["state"][i], info["state"], rtol=1e-13, atol=1e-9)
             assert vr[i] == pytest.approx(r, abs=1e-12)
@@ -118,3 +122,19 @@ def test_out_of_range_actions_are_refused(action):
     venv.reset(seed=0)
     with pytest.raises(ValueError):
         venv.step(np.array([0, action]) if not isinstance(action, str) else np.array([0, 999]))
+
+
+def test_without_autoreset_a_fixed_set_of_episodes_flies_and_ended_ones_freeze():
+    venv = make_vector_env(3, disturbance=False, max_time_s=2.0, autoreset=False)
+    venv.reset(seed=0)
+    free_fall = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 0]))
+    steps = 0
+    while venv.active.any():
+        _, _, term, trunc, info = venv.step(np.full(3, free_fall))
+        steps += 1
+    assert steps == 10 and trunc.all() and not term.any()
+    frozen = venv.states.copy()
+    _, r, term, trunc, info = venv.step(np.full(3, free_fall))
+    np.testing.assert_array_equal(venv.states, frozen)
+    assert not (term | trunc | info["active"]).any() and (r == 0).all()
+    assert (venv.steps == 10).all()

@@ -1,0 +1,163 @@
+"""Dispersions change what the plant does by what the equations say, and stay seeded."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pd_core import dynamics
+from pd_core.config import DT_S, G0_MPS2, ISP_S, TABLE3
+from pd_core.controllers import ZemZevController
+from pd_core.dispersions import SCENARIOS, Dispersions, load_scenarios
+from pd_core.env import make_vector_env
+from pd_core.evaluate import rollout
+
+HOVER = 73  # levels (3, 3, 1): zero lateral thrust, 6.5 kN up
+N = 64
+
+
+def _env(d: Dispersions | str, n: int = N, disturbance: bool = False):
+    env = make_vector_env(n, disturbance=disturbance, autoreset=False, dispersions=d)
+    env.reset(seed=500)
+    return env
+
+
+def test_nominal_scenario_is_bit_identical_to_no_dispersions():
+    ctl = ZemZevController()
+    a = rollout(ctl, 40, seed=3)
+    b = rollout(ctl, 40, seed=3, dispersions="nominal")
+    np.testing.assert_array_equal(a.final_states, b.final_states)
+    np.testing.assert_array_equal(a.returns, b.returns)
+
+
+def test_thrust_error_scales_the_delivered_thrust_per_thruster():
+    env = _env(Dispersions("t10", thrust_error=0.10))
+    gain = env._disp.thrust_gain.copy()
+    assert np.all(np.abs(gain - 1.0) <= 0.10) and np.ptp(gain) > 0.1  # spread over +-10 %
+    s0 = env.states.copy()
+    cmd = env.actions.thrust(np.full(N, 146))  # (10, 10, 13) kN
+    for _ in range(50):
+        env.step(np.full(N, 146))
+    want = s0
+    for _ in range(50):  # Eq. 2 with the delivered thrust, Eq. 3 with its flow
+        want = dynamics.step(want, cmd * gain, np.zeros((N, 3)), DT_S)
+    np.testing.assert_allclose(env.states, want, rtol=1e-12, atol=1e-9)
+    # the rocket equation for 10 s of constant delivered thrust (T, mdot): what it changes in vz
+    t = 50 * DT_S
+    tk = cmd * gain
+    mdot = np.abs(tk).sum(axis=1) / (ISP_S * G0_MPS2)
+    vz = s0[:, 5] - 3.72 * t + tk[:, 2] / mdot * np.log(s0[:, 6] / (s0[:, 6] - mdot * t))
+    np.testing.assert_allclose(env.states[:, 5], vz, rtol=1e-10)
+    nominal = _env("nominal")
+    for _ in range(50):
+        nominal.step(np.full(N, 146))
+    assert np.abs(env.states[:, 5] - nominal.states[:, 5]).max() > 5.0  # m/s: it matters
+
+
+def test_isp_error_changes_only_the_mass_flow():
+    env = _env(Dispersions("i5", isp_error=0.05))
+    isp = env._disp.isp_s.copy()
+    assert np.all(np.abs(isp / ISP_S - 1.0) <= 0.05)
+    m0 = env.states[:, 6].copy()
+    env.step(np.full(N, HOVER))
+    np.testing.assert_allclose(m0 - env.states[:, 6], 6500.0 / (isp * G0_MPS2) * DT_S, rtol=1e-12)
+
+
+def test_misalignment_rotates_the_thrust_by_at_most_its_angle():
+    env = _env(Dispersions("m2", misalignment_deg=2.0))
+    rot = env._disp.rotation
+    cmd = env.actions.thrust(np.full(N, HOVER))
+    got = np.einsum("nij,nj->ni", rot, cmd)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 6500.0, rtol=1e-12)
+    angle = np.degrees(np.arccos(np.clip(got[:, 2] / 6500.0, -1, 1)))
+    assert angle.max() <= 2.0 + 1e-9 and angle.max() > 1.0
+    s0 = env.states.copy()
+    env.step(np.full(N, HOVER))
+    np.testing.assert_allclose(env.states, dynamics.step(s0, got, np.zeros((N, 3)), DT_S))
+
+
+def test_one_step_delay_flies_the_previous_command():
+    env = _env("delay")
+    s0 = env.states.copy()
+    zero = np.zeros((N, 3))
+    env.step(np.full(N, 146))  # engines not yet lit: free fall
+    s1 = dynamics.step(s0, zero, zero, DT_S)
+    np.testing.assert_array_equal(env.states, s1)
+    env.step(np.full(N, 0))  # now the first command (146) arrives
+    full = np.tile(env.actions.thrust(146), (N, 1))
+    np.testing.assert_array_equal(env.states, dynamics.step(s1, full, zero, DT_S))
+
+
+def test_nav_noise_is_on_the_observation_only():
+    noisy, clean = _env("nav-noise"), _env("nominal")
+    np.testing.assert_array_equal(noisy.states, clean.states)  # same seed, same initial states
+    err = []
+    for _ in range(40):
+        _, _, _, _, info = noisy.step(np.full(N, HOVER))
+        clean.step(np.full(N, HOVER))
+        err.append(info["observed_state"] - info["state"])
+    np.testing.assert_array_equal(noisy.states, clean.states)  # the plant is untouched
+    sd = np.concatenate(err).std(axis=0)
+    np.testing.assert_allclose(sd, [1, 1, 1, 0.1, 0.1, 0.1, 10], rtol=0.1)
+
+
+def test_mass_gusts_and_wide_box_draws():
+    nominal = _env("nominal", 400, disturbance=True)
+    mass = _env("mass", 400)
+    m = mass.states[:, 6]
+    assert m.min() >= 1800 and m.max() <= 2200 and np.ptp(m) > 350
+    np.testing.assert_array_equal(mass.states[:, :6], nominal.states[:, :6])  # common numbers
+    gusts = _env("gusts", 400, disturbance=True)
+    np.testing.assert_allclose(gusts._knots, 3.0 * nominal._knots, rtol=1e-15)
+    wide = _env("wide-box", 400).states
+    box = SCENARIOS["wide-box"].initial_box(TABLE3)
+    assert np.all(wide >= box.lo) and np.all(wide <= box.hi)
+    outside = (wide < TABLE3.lo) | (wide > TABLE3.hi)
+    assert 0.3 < outside[:, :6].any(axis=1).mean() < 0.95
+
+
+def test_seeded_campaign_repeats_and_does_not_depend_on_chunking():
+    ctl = ZemZevController()
+    a = rollout(ctl, 30, seed=9, dispersions="all")
+    b = rollout(ctl, 30, seed=9, dispersions="all", chunk=7)
+    for f in ("final_states", "landed", "steps", "returns", "initial_states"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    c = rollout(ctl, 30, seed=10, dispersions="all")
+    assert not np.array_equal(a.final_states, c.final_states)
+
+
+def test_state_dict_round_trip_continues_exactly():
+    env = make_vector_env(8, dispersions="all")
+    env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(300):  # past some episode ends (autoreset draws again)
+        env.step(rng.integers(0, 147, 8))
+    saved = env.state_dict()
+    actions = rng.integers(0, 147, (200, 8))
+    a = [env.step(x)[0] for x in actions]
+    other = make_vector_env(8, dispersions="all")
+    other.load_state_dict(saved)
+    b = [other.step(x)[0] for x in actions]
+    np.testing.assert_array_equal(np.array(a), np.array(b))
+    with pytest.raises(ValueError, match="dispersions"):
+        make_vector_env(8, dispersions="mass").load_state_dict(saved)
+
+
+def test_yaml_scenarios_and_bad_names(tmp_path):
+    f = tmp_path / "mine.yaml"
+    f.write_text(
+        "scenarios:\n  - nominal\n  - {base: mass, name: heavy, mass_kg: [2100, 2400]}\n"
+        "  - {name: late, delay_steps: 2, thrust_error: 0.03}\n"
+    )
+    s = load_scenarios(str(f))
+    assert [d.name for d in s] == ["nominal", "heavy", "late"]
+    assert s[1].mass_kg == (2100.0, 2400.0) and s[2].delay_steps == 2
+    assert [d.name for d in load_scenarios("standard")] == list(SCENARIOS)
+    with pytest.raises(ValueError, match="unknown dispersion scenario"):
+        load_scenarios("nominal,windy")
+    f.write_text("thrust_eror: 0.1\n")
+    with pytest.raises(ValueError, match="thrust_eror"):
+        load_scenarios(str(f))
+    assert math.isclose(SCENARIOS["all"].misalignment_deg, 2.0)
