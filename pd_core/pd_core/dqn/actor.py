@@ -1,0 +1,25 @@
+"""Greedy actor of a live Q-network (training's periodic evaluation, tests).
+
+A policy *file* needs no torch to fly: `pd_core.policy.load_policy` returns a `Policy` whose
+`act_batch` runs numpy copies of the layers. This actor is for a `QNetwork` object in memory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from pd_core.dqn.network import QNetwork
+from pd_core.state import scale_state
+
+
+class NetActor:
+    """Greedy actions of a Q-network on physical states (`pd_core.evaluate.Actor`)."""
+
+    def __init__(self, net: QNetwork) -> None:
+        self.net = net
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            q = self.net(torch.from_numpy(scale_state(states)))
+        return q.argmax(dim=1).numpy()
