@@ -1,4 +1,4 @@
-"""pd_ocp_node: serves /ocp/compute_trajectory (pd_interfaces/srv/ComputeTrajectory).
+"""pd_ocp_node: serves ocp/compute_trajectory (pd_interfaces/srv/ComputeTrajectory).
 
 The request callback runs on a worker thread of a MultiThreadedExecutor in a
 ReentrantCallbackGroup, and the solve itself (`pd_core.ocp.solve`, which never raises) runs in a
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import signal
 import sys
 import threading
 import time
@@ -29,18 +30,16 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
-import rclpy
-from geometry_msgs.msg import Vector3
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from pd_ros_common.convert import fill_ocp_response, from_vec3, vec3
+from pd_ros_common.run import run_node
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from pd_core import ocp
-from pd_core.cli.node_help import node_help, wants_help
 from pd_core.config import OCP_CONTROL_POINTS
+from pd_core.discretise import discretise
 from pd_interfaces.srv import ComputeTrajectory
+from pd_ros_common import names, params, qos
 
 NODE_NAME = "pd_ocp_node"
 
@@ -75,34 +74,21 @@ PARAMETERS: dict[str, tuple[Any, str, bool]] = {
         True,
     ),
 }
-
-_VECTOR_OF = ("x", "y", "z")
-
-
-def vectors(rows: np.ndarray) -> list[Vector3]:
-    return [Vector3(x=float(r[0]), y=float(r[1]), z=float(r[2])) for r in np.asarray(rows)]
-
-
-def fill_response(res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:
-    """Copy an OCPResult into the service response (trajectory only when the solve succeeded)."""
-    response.success = bool(res.success)
-    response.message = str(res.message)
-    response.solve_time = float(res.solve_time)
-    for key in ("time_of_flight", "fuel", "cost"):
-        v = float(getattr(res, key))
-        setattr(response, key, v if math.isfinite(v) else 0.0)
-    if len(res.states):
-        response.control_times = [float(t) for t in res.control_times]
-        response.thrust = vectors(res.thrust)
-        response.state_times = [float(t) for t in res.state_times]
-        response.positions = vectors(res.states[:, 0:3])
-        response.velocities = vectors(res.states[:, 3:6])
-        response.masses = [float(m) for m in res.states[:, 6]]
+# The same checks at start-up and for `ros2 param set` (pd_ros_common.params).
+CHECKS: dict[str, params.Check] = {
+    "method": params.one_of(ocp.METHODS),
+    "objective": params.one_of(ocp.OBJECTIVES),
+    "control_points": params.at_least(2),
+    "timeout_s": params.above(0.0),
+    "max_pending": params.at_least(1),
+}
 
 
 def _warm_up() -> None:
-    """Solver process initialiser: import the solver once, not on the first request."""
-    import pd_core.ocp  # noqa: F401
+    """Solver process initialiser. Unpickling it imports this module, and with it pd_core.ocp,
+    in the solver process when the pool starts, not on the first request. Ctrl-C reaches the
+    whole process group: the node stops its solver itself, so the solver ignores SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _solver_pool() -> ProcessPoolExecutor:
@@ -120,13 +106,10 @@ class OcpNode(Node):
     """Thin ROS adapter over `pd_core.ocp.solve`."""
 
     def __init__(self, **kwargs: Any) -> None:
+        self._pool: ProcessPoolExecutor | None = None  # destroy_node works whatever fails
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text, read_only) in PARAMETERS.items():
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=text, read_only=read_only)
-            )
-        self.add_on_set_parameters_callback(self._check_parameters)
-        self.max_pending = max(1, int(self.get_parameter("max_pending").value))
+        p = params.declare(self, PARAMETERS, CHECKS)
+        self.max_pending = p["max_pending"]
         self._solve_lock = threading.Lock()  # one solve at a time: they are CPU-bound
         self._pool = _solver_pool()
         self._pool.submit(math.sqrt, 1.0)  # start the solver process now
@@ -135,29 +118,19 @@ class OcpNode(Node):
         self.served = 0
         self.create_service(
             ComputeTrajectory,
-            "/ocp/compute_trajectory",
+            names.OCP_SERVICE,
             self._on_request,
+            qos_profile=qos.SERVICE_QOS,  # a burst waits here instead of being dropped
             callback_group=ReentrantCallbackGroup(),
         )
         self.get_logger().info(
-            f"OCP service ready: method={self.get_parameter('method').value}, "
-            f"objective={self.get_parameter('objective').value}, "
-            f"control_points={self.get_parameter('control_points').value}, "
-            f"timeout_s={self.get_parameter('timeout_s').value}"
+            f"OCP service ready: method={p['method']}, objective={p['objective']}, "
+            f"control_points={p['control_points']}, timeout_s={p['timeout_s']}, "
+            f"max_pending={p['max_pending']}"
         )
 
-    def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        for p in params:
-            v = p.value
-            bad = (
-                (p.name == "method" and v not in ocp.METHODS)
-                or (p.name == "objective" and v not in ocp.OBJECTIVES)
-                or (p.name == "control_points" and not (isinstance(v, int) and v >= 2))
-                or (p.name == "timeout_s" and not (isinstance(v, float) and v > 0))
-            )
-            if bad:
-                return SetParametersResult(successful=False, reason=f"bad {p.name}: {v!r}")
-        return SetParametersResult(successful=True)
+    def _param(self, name: str) -> Any:
+        return params.value(self, name, PARAMETERS)
 
     def _on_request(
         self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response
@@ -185,12 +158,12 @@ class OcpNode(Node):
     def _solve(
         self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response
     ) -> ComputeTrajectory.Response:
-        position = [getattr(request.position, a) for a in _VECTOR_OF]
-        velocity = [getattr(request.velocity, a) for a in _VECTOR_OF]
-        method = request.method or str(self.get_parameter("method").value)
-        objective = request.objective or str(self.get_parameter("objective").value)
-        n_control = int(request.control_points) or int(self.get_parameter("control_points").value)
-        timeout = float(request.timeout) or float(self.get_parameter("timeout_s").value)
+        position = from_vec3(request.position).tolist()
+        velocity = from_vec3(request.velocity).tolist()
+        method = request.method or self._param("method")
+        objective = request.objective or self._param("objective")
+        n_control = int(request.control_points) or self._param("control_points")
+        timeout = float(request.timeout) or self._param("timeout_s")
         why = ocp.check_request(position, velocity, request.mass)
         if why is None and not (math.isfinite(timeout) and timeout > 0):
             why = f"timeout must be > 0 s, got {timeout!r}"
@@ -200,12 +173,17 @@ class OcpNode(Node):
             self.get_logger().warning(response.message)
             return response
         t_arrive = time.monotonic()
+        queued = self._solve_lock.locked()  # an earlier solve is running
         with self._solve_lock:
             waited = time.monotonic() - t_arrive
             left = timeout - waited
             if left <= 0:
                 response.success = False
-                response.message = f"timeout: waited {waited:.1f} s for an earlier solve"
+                response.message = (
+                    f"timeout: waited {waited:.1f} s for an earlier solve"
+                    if queued
+                    else f"timeout: {timeout:g} s is too short to start a solve"
+                )
                 return response
             res = self._solve_in_process(
                 position,
@@ -216,7 +194,7 @@ class OcpNode(Node):
                 n_control=n_control,
                 timeout_s=left,
             )
-        fill_response(res, response)
+        fill_ocp_response(res, response)
         if res.success and request.discretise:
             self._discretise(res, response)
         self.served += 1
@@ -257,53 +235,37 @@ class OcpNode(Node):
     def destroy_node(self) -> None:
         # Stop the solver process and join the pool's manager thread now: left to the
         # interpreter's exit hook, it writes to a closed pipe and prints a traceback.
-        procs = list(getattr(self._pool, "_processes", {}).values())
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            proc.join(timeout=2.0)
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        if self._pool is not None:
+            procs = list(getattr(self._pool, "_processes", {}).values())
+            for proc in procs:
+                proc.terminate()
+            for proc in procs:
+                proc.join(timeout=2.0)
+            self._pool.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
     def _discretise(self, res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:
         """Discretised actions of Eqs. 5-7 (`pd_core.discretise.discretise`, (7, 7, 3) actions)."""
         try:
-            from pd_core.discretise import discretise
-
             run = discretise(res)
         except Exception as exc:  # report, do not fail the trajectory that was solved
             response.message += f"; discretisation failed: {exc}"
             return
         response.actions = [int(a) for a in np.asarray(run.actions).reshape(-1)]
         start = np.asarray(run.initial_state, dtype=float)
-        response.discrete_initial_position = Vector3(
-            x=float(start[0]), y=float(start[1]), z=float(start[2])
-        )
+        response.discrete_initial_position = vec3(start)
         response.discrete_landed = bool(run.landed)
 
 
 def main(args: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if args is None else args
-    if wants_help(argv):
-        print(node_help("pd_ocp_node", "pd_ocp_node", __doc__ or "", PARAMETERS))
-        return 0
-    rclpy.init(args=args)
-    node = None
-    executor = None
-    try:
-        node = OcpNode()
-        executor = MultiThreadedExecutor(num_threads=node.max_pending + 2)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(
+        NODE_NAME,
+        __doc__ or "",
+        PARAMETERS,
+        OcpNode,
+        args,
+        threads=lambda node: node.max_pending + 2,
+    )
 
 
 if __name__ == "__main__":

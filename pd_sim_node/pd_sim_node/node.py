@@ -1,18 +1,22 @@
-"""pd_sim_node: flies `pd_core.sim.Simulator` and speaks /lander/state, /lander/thrust_cmd,
-/lander/episode and /sim/reset.
+"""pd_sim_node: flies `pd_core.sim.Simulator` and speaks lander/state, lander/thrust_cmd,
+lander/episode and sim/reset (relative names: /lander/... in the root namespace).
 
 Real-time mode (default): a wall-clock ticker (absolute deadlines, no drift) advances one step of
 dt = 0.2 s and publishes the new state every 1 / rate_hz seconds. The command that answers the
 current step must arrive before the next tick; otherwise the step is flown with the last applied
-command held, or with zero thrust (`missing_command`).
+command held, or with zero thrust (`missing_command`). An episode started at start-up or by
+sim/reset waits for the first command answering its step 0 before its clock starts (the state is
+published again every `resend_s` meanwhile), so a policy that is still loading never misses the
+first steps; after `start_wait_s` without one it flies anyway, with a warning.
 
 Lockstep mode: the simulator advances as soon as a valid command answering the current step has
 arrived, so an episode flies as fast as the policy answers and is deterministic. If no answer
-comes within `lockstep_resend_s`, the current state is published again (a restarted policy node
-then picks the loop up).
+comes within `resend_s`, the current state is published again (a restarted policy node then picks
+the loop up). With `auto_restart`, the next episode starts as soon as one ends.
 
-Every parameter is read at start-up (read-only afterwards); defaults are in
-pd_bringup/config/sim.yaml.
+The first valid command for a step is flown; later ones for the same step are rejected, counted
+and logged like every invalid command. Every parameter is read at start-up (read-only
+afterwards); defaults are in pd_bringup/config/sim.yaml.
 """
 
 from __future__ import annotations
@@ -23,52 +27,24 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
+from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
+from pd_ros_common.run import run_node
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from pd_core.cli.node_help import node_help, wants_help
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S
 from pd_core.sim import MISSING_COMMAND_MODES, FixedRateTicker, Simulator, percentiles_ms
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
-from pd_sim_node.convert import command_from_msg, from_vec3, result_msg, state_msg, vec3
+from pd_ros_common import names, params, qos
 
 NODE_NAME = "pd_sim_node"
-
-# State and commands: every message counts, nobody needs old ones (compatible with any
-# RELIABLE or BEST_EFFORT, VOLATILE subscriber). The subscription keeps 10; the state publisher
-# keeps 1000 unacknowledged messages (more than a whole 750-step episode), so a slower subscriber
-# (recorder, monitor) catches up after a lockstep burst instead of losing states: a KEEP_LAST
-# writer drops its oldest sample for every reader once its history is full (depth is not part
-# of QoS matching).
-LOOP_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
-STATE_PUB_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
-# Episode results: a late subscriber (VOLATILE or TRANSIENT_LOCAL) may still want the last ones.
-EPISODE_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
 
 # name: (default, description); every one is read at start-up.
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "rate_hz": (
         1.0 / DT_S,
-        "Real-time mode: steps (and /lander/state messages) per second of wall clock. "
+        "Real-time mode: steps (and lander/state messages) per second of wall clock. "
         "5.0 = real time (one dt = 0.2 s per message). Ignored in lockstep.",
     ),
     "lockstep": (
@@ -76,10 +52,16 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "Step only when the command answering the current step has arrived (as fast as the "
         "policy answers, deterministic) instead of on the wall clock.",
     ),
-    "lockstep_resend_s": (
+    "resend_s": (
         1.0,
-        "Lockstep: publish the current state again after this many seconds without an answer "
-        "(0 = never).",
+        "Publish the current state again after this many seconds without an answer: in "
+        "lockstep, and in real time while an episode waits for its first command (0 = never).",
+    ),
+    "start_wait_s": (
+        60.0,
+        "Real time: an episode started at start-up or by sim/reset starts its clock when the "
+        "first command answering step 0 arrives, or after this many seconds without one "
+        "(flying without commands, with a warning). 0 = start at once.",
     ),
     "missing_command": (
         "hold",
@@ -89,18 +71,18 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "seed": (
         0,
         "Seed of the first episode (initial state and disturbance); later episodes continue "
-        "the RNG unless /sim/reset reseeds. -1 = unseeded.",
+        "the RNG unless sim/reset reseeds. -1 = unseeded.",
     ),
     "disturbance": (True, "Apply the random disturbance force of Sec. 3.2 (sigma 100 N)."),
     "autostart": (
         True,
         "Start the first episode at start-up (from initial_state, or Table 3 with seed). "
-        "false = wait for /sim/reset.",
+        "false = wait for sim/reset.",
     ),
     "auto_restart": (
         False,
-        "When an episode ends, start the next one (Table 3, RNG continued) one period later; "
-        "false = publish the result and wait for /sim/reset.",
+        "When an episode ends, start the next one (Table 3, RNG continued): one period later "
+        "in real time, at once in lockstep; false = publish the result and wait for sim/reset.",
     ),
     "initial_state": (
         [0.0],
@@ -123,65 +105,74 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
 }
 
+CHECKS: dict[str, params.Check] = {
+    "rate_hz": params.above(0.0),
+    "resend_s": params.at_least(0.0),
+    "start_wait_s": params.at_least(0.0),
+    "missing_command": params.one_of(MISSING_COMMAND_MODES),
+    "seed": params.at_least(-1),
+    "max_time_s": params.at_least(DT_S),
+    "tick_priority": params.at_least(0),
+    "log_rejections": params.at_least(0),
+}
+
 
 class SimNode(Node):
     """Thin ROS adapter: messages in, `Simulator` calls, messages out."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text) in PARAMETERS.items():
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=text, read_only=True)
-            )
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        if p["missing_command"] not in MISSING_COMMAND_MODES:
-            raise ValueError(
-                f"missing_command must be one of {MISSING_COMMAND_MODES}, "
-                f"got {p['missing_command']!r}"
-            )
-        if not p["rate_hz"] > 0:
-            raise ValueError(f"rate_hz must be > 0, got {p['rate_hz']}")
-        self.rate_hz = float(p["rate_hz"])
-        self.lockstep = bool(p["lockstep"])
-        self.resend_s = float(p["lockstep_resend_s"])
-        self.auto_restart = bool(p["auto_restart"])
-        self.log_rejections = int(p["log_rejections"])
-        self.tick_priority = int(p["tick_priority"])
-        seed = int(p["seed"])
-
+        # Before Node.__init__: destroy_node must work whatever fails after this point.
         self._lock = threading.Lock()
-        self._sim = Simulator(
-            disturbance=bool(p["disturbance"]),
-            missing_command=str(p["missing_command"]),
-            max_time_s=float(p["max_time_s"]),
-            seed=seed if seed >= 0 else None,
-        )
         self._ticker: FixedRateTicker | None = None
+        super().__init__(NODE_NAME, **kwargs)
+        p = params.declare(self, PARAMETERS, CHECKS)
+        self.rate_hz = p["rate_hz"]
+        self.lockstep = p["lockstep"]
+        self.resend_s = p["resend_s"]
+        self.start_wait_s = 0.0 if self.lockstep else p["start_wait_s"]
+        self.auto_restart = p["auto_restart"]
+        self.log_rejections = p["log_rejections"]
+        self.tick_priority = p["tick_priority"]
+        self._sim = Simulator(
+            disturbance=p["disturbance"],
+            missing_command=p["missing_command"],
+            max_time_s=p["max_time_s"],
+            seed=p["seed"] if p["seed"] >= 0 else None,
+        )
         self._restart_due = False
+        self._waiting_since: float | None = None  # real time: episode waits for its 1st command
         self._last_publish = time.monotonic()
         self._lateness: list[float] = []
+        self.lost_commands = 0
 
-        self._state_pub = self.create_publisher(LanderState, "/lander/state", STATE_PUB_QOS)
-        self._episode_pub = self.create_publisher(EpisodeResult, "/lander/episode", EPISODE_QOS)
-        self._cmd_sub = self.create_subscription(
-            ThrustCommand, "/lander/thrust_cmd", self._on_command, LOOP_QOS
+        self._state_pub = self.create_publisher(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS)
+        self._episode_pub = self.create_publisher(
+            EpisodeResult, names.EPISODE_TOPIC, qos.EPISODE_QOS
         )
-        self.create_service(ResetEpisode, "/sim/reset", self._on_reset)
+        self._cmd_sub = self.create_subscription(
+            ThrustCommand,
+            names.COMMAND_TOPIC,
+            self._on_command,
+            qos.LOOP_SUB_QOS,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
+        )
+        self.create_service(
+            ResetEpisode, names.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS
+        )
         self._links = (-1, -1)
         self.create_timer(0.1, self._log_links)
-        if self.lockstep and self.resend_s > 0:
-            self.create_timer(min(self.resend_s, 0.5) / 2, self._resend_check)
+        self.create_timer(min(self.resend_s or 0.5, 0.5) / 2, self._resend_check)
 
         mode = "lockstep" if self.lockstep else f"real time at {self.rate_hz:g} Hz"
         self.get_logger().info(
             f"simulator ready: {mode}, missing_command={p['missing_command']}, "
-            f"disturbance={p['disturbance']}, seed={seed}"
+            f"disturbance={p['disturbance']}, seed={p['seed']}"
         )
         if p["autostart"]:
             init = p["initial_state"]
             state = np.asarray(init, dtype=float) if len(init) == 7 else None
             with self._lock:
-                self._start_episode(state, None)
+                self._start_episode(state, None, wait=True)
 
     def _log_links(self) -> None:
         """Log when a policy (or monitor) joins or leaves: the matched DDS endpoints change."""
@@ -189,13 +180,24 @@ class SimNode(Node):
         if links != self._links:
             self._links = links
             self.get_logger().info(
-                f"links: {links[0]} subscriber(s) of /lander/state, "
-                f"{links[1]} publisher(s) of /lander/thrust_cmd"
+                f"links: {links[0]} subscriber(s) of {self._state_pub.topic_name}, "
+                f"{links[1]} publisher(s) of {self._cmd_sub.topic_name}"
             )
 
+    def _on_lost(self, info: Any) -> None:
+        """Commands DDS lost before they reached us (a queue overflowed): count and log."""
+        self.lost_commands = int(info.total_count)
+        self.get_logger().warning(
+            f"{info.total_count_change} command(s) lost before delivery ({info.total_count} in all)"
+        )
+
     # ------------------------------------------------------------------ episodes
-    def _start_episode(self, initial_state: np.ndarray | None, seed: int | None) -> int:
-        """Reset the simulator and publish step 0 (caller holds the lock). ValueError passes."""
+    def _start_episode(self, initial_state: np.ndarray | None, seed: int | None, wait: bool) -> int:
+        """Reset the simulator and publish step 0 (caller holds the lock). ValueError passes.
+
+        Real time: the clock starts now, or (`wait` and start_wait_s > 0) when the first
+        command answering step 0 arrives.
+        """
         episode, init, interrupted = self._sim.reset(initial_state, seed)
         if interrupted is not None:
             self._publish_result(interrupted)
@@ -205,15 +207,25 @@ class SimNode(Node):
             f"v = {np.round(init[3:6], 2).tolist()} m/s, m = {init[6]:.1f} kg"
         )
         self._publish_state()
+        self._stop_ticker()
+        self._waiting_since = None
         if not self.lockstep:
-            self._start_ticker()
+            if wait and self.start_wait_s > 0:
+                self._waiting_since = time.monotonic()
+            else:
+                self._start_ticker()
         return episode
 
-    def _start_ticker(self) -> None:
-        """A fresh ticker per episode, so every step of it lasts one full period."""
+    def _stop_ticker(self) -> None:
         if self._ticker is not None:
             self._keep_lateness(self._ticker)
             self._ticker.stop(join=False)  # it may be waiting for our lock: do not join
+            self._ticker = None
+
+    def _start_ticker(self) -> None:
+        """A fresh ticker per episode, so every step of it lasts one full period."""
+        self._stop_ticker()
+        self._waiting_since = None
         ticker = FixedRateTicker(
             1.0 / self.rate_hz,
             lambda: self._tick(ticker),
@@ -241,7 +253,7 @@ class SimNode(Node):
                 if self._sim.flying:
                     self._advance()
                 elif self._restart_due:
-                    self._start_episode(None, None)  # replaces this ticker
+                    self._start_episode(None, None, wait=False)  # replaces this ticker
                 else:
                     ticker.stop(join=False)
             except Exception as exc:  # never let the clock thread die silently
@@ -251,11 +263,14 @@ class SimNode(Node):
         """One step with whatever command the simulator holds; publish state and result."""
         out = self._sim.advance()
         self._publish_state()
-        if out.done:
-            self._publish_result(out.result)
-            self._restart_due = self.auto_restart
-            if not self._restart_due and self._ticker is not None:
-                self._ticker.stop(join=False)
+        if not out.done:
+            return
+        self._publish_result(out.result)
+        self._restart_due = self.auto_restart
+        if self.lockstep and self.auto_restart:
+            self._start_episode(None, None, wait=False)
+        elif not self._restart_due:
+            self._stop_ticker()
 
     def _publish_state(self) -> None:
         s = self._sim
@@ -276,16 +291,13 @@ class SimNode(Node):
             f"({result['time_of_flight']:.1f} s): {result['reason']}; fuel "
             f"{result['fuel']:.1f} kg; commands rejected {result['rejected_commands']}, "
             f"missed {result['missed_commands']} (totals: accepted {c.accepted_commands}, "
-            f"rejected {c.rejected_commands}, missed {c.missed_commands}){jitter}"
+            f"rejected {c.rejected_commands}, missed {c.missed_commands}, "
+            f"lost {self.lost_commands}){jitter}"
         )
 
     # ------------------------------------------------------------------ callbacks
     def _on_command(self, msg: ThrustCommand) -> None:
-        try:
-            cmd = command_from_msg(msg)
-        except (TypeError, ValueError) as exc:  # cannot happen with typed fields; be safe
-            self.get_logger().warning(f"unreadable command rejected: {exc}")
-            return
+        cmd = command_from_msg(msg)
         with self._lock:
             err = self._sim.submit(cmd)
             if err is not None:
@@ -297,14 +309,31 @@ class SimNode(Node):
                 return
             if self.lockstep and self._sim.has_fresh_command:
                 self._advance()
+            elif self._waiting_since is not None and self._sim.has_fresh_command:
+                waited = time.monotonic() - self._waiting_since
+                self.get_logger().info(
+                    f"first command of episode {self._sim.episode} after {waited:.1f} s: "
+                    "the clock starts"
+                )
+                self._start_ticker()
 
     def _resend_check(self) -> None:
         with self._lock:
-            if self._sim.flying and time.monotonic() - self._last_publish >= self.resend_s:
-                self.get_logger().info(
-                    f"lockstep: no answer for step {self._sim.step} after {self.resend_s:g} s; "
-                    "publishing the state again"
+            if not self._sim.flying or (not self.lockstep and self._waiting_since is None):
+                return
+            now = time.monotonic()
+            if self._waiting_since is not None and now - self._waiting_since > self.start_wait_s:
+                self.get_logger().warning(
+                    f"no command for step 0 of episode {self._sim.episode} within "
+                    f"{self.start_wait_s:g} s: flying without (missing_command applies)"
                 )
+                self._start_ticker()
+            elif self.resend_s > 0 and now - self._last_publish >= self.resend_s:
+                if self.lockstep:
+                    self.get_logger().info(
+                        f"lockstep: no answer for step {self._sim.step} after "
+                        f"{self.resend_s:g} s; publishing the state again"
+                    )
                 self._publish_state()
 
     def _on_reset(
@@ -312,13 +341,11 @@ class SimNode(Node):
     ) -> ResetEpisode.Response:
         state = None
         if request.use_initial_state:
-            state = np.array(
-                [*from_vec3(request.position), *from_vec3(request.velocity), request.mass]
-            )
+            state = state_vector(request.position, request.velocity, request.mass)
         seed = int(request.seed) if request.seed >= 0 else None
         with self._lock:
             try:
-                episode = self._start_episode(state, seed)
+                episode = self._start_episode(state, seed, wait=True)
             except ValueError as exc:
                 response.success = False
                 response.message = f"reset refused: {exc}"
@@ -343,25 +370,7 @@ class SimNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if args is None else args
-    if wants_help(argv):
-        print(node_help("pd_sim_node", "pd_sim_node", __doc__ or "", PARAMETERS))
-        return 0
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:  # a bad parameter value
-        print(f"{NODE_NAME}: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(NODE_NAME, __doc__ or "", PARAMETERS, SimNode, args)
 
 
 if __name__ == "__main__":

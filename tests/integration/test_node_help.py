@@ -1,6 +1,6 @@
 """`--help` of the nodes lists every parameter without starting ROS."""
 
-from pd_core.cli.node_help import node_help, wants_help
+from pd_ros_common.node_help import node_help, wants_help
 
 
 def test_help_flag_only_before_ros_args():

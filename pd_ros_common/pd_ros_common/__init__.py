@@ -1,0 +1,7 @@
+"""What the powered-descent nodes, bringup tools and tests share (see the README's layout table).
+
+`names` (topic and service names), `qos` (QoS profiles), `convert` (messages <-> numpy),
+`params` (typed, checked parameters), `node_help` (`--help` of a node), `run` (a node's
+`main`), `process` (child processes and their supervision), `domain` (a ROS domain of one's own).
+Importing the package imports nothing; each module imports what it needs.
+"""
