@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from tqdm import tqdm
 
 from pd_core import discretise as disc
 from pd_core import ocp
@@ -95,8 +96,6 @@ def build_demos(
     states = np.atleast_2d(np.asarray(initial_states, dtype=float))
     iterator: Any = states
     if progress:
-        from tqdm import tqdm
-
         iterator = tqdm(states, desc="OCP solves", unit="case")
     results = [
         ocp.solve(s[0:3], s[3:6], s[6], method=method, objective=objective) for s in iterator

@@ -21,21 +21,23 @@ velocities only, so the second pass repeats the first shifted by -x_f until it e
   (0, 6.5, 13 kN) the middle level already decelerates the lander once m < 1747 kg, so when Eq. 5
   drives v_3 to ~0 a few steps before t_f the lander hovers or climbs; under "ocp_time" the
   shifted run then crosses 0.01 m those few steps early, while the lateral channels still carry
-  the OCP's 1.5-3.5 m/s of final approach, and misses the 2 m/s limit (12 of 33 cases at
-  (7, 7, 3): 63.6 % landed; "lowest": 87.9 %, paper 81.8 %).
+  part of the OCP's final approach, and can miss the 2 m/s limit (33 Table 1 cases at (7, 7, 3),
+  `pd-ocp demos` references: "lowest" 100 % landed, "ocp_time" 93.9 %; paper 81.8 %).
 * "ocp_time": x_f is the position after the OCP's number of steps. The second pass then ends on
   the ground at that step, unless the shifted trajectory dips below 0.01 m earlier.
 * "touchdown": x_f is where a first pass that stops at the ground first goes below 0.01 m. A
   first pass that ends above the ground hovers (v* is held at 0 after t_f) until the time limit,
-  so this reading fails badly (51.5 %).
+  so this reading fails badly (0 % of the 33 cases).
 
 Other open choices, measured over the Table 5 grid and kept as the literal reading: sgn(0) rounds
 down (no lane hits dv = 0 exactly; "up" gives identical tables); v*_{t+1} indexed by step on the
 dt = 0.2 s grid the OCP result is re-flown on (the OCP's own control-point grid is ~0.7 s); v* held
 at 0 only once t + 1 passes the OCP's end (holding it from an altitude of 5-20 m makes the
-lander hover: 9 %). `predicted=True` (ours, not the paper's) compares v*_{t+1} with the velocity the
-optimal thrust would give at t + 1, which removes the one-step lead of the literal Eq. 6 (the
-literal tracker holds v_t ~ v*_{t+1}): 93.9 % with "lowest", 69.7 % with "ocp_time".
+lander hover; measured on the less converged references before the gradient fix).
+`predicted=True` (ours, not the paper's) compares v*_{t+1} with the velocity the optimal thrust
+would give at t + 1, which removes the one-step lead of the literal Eq. 6 (the literal tracker
+holds v_t ~ v*_{t+1}); with the converged references it lands as the literal rule (100 % with
+"lowest", 93.9 % with "ocp_time").
 
 Episodes end (terminated) at altitude < 0.01 m through `pd_core.env.transition`, without
 disturbance (as the paper), or are cut at MAX_EPISODE_TIME_S.
@@ -92,7 +94,7 @@ def reference(result: Any, limits: ThrustLimits = RL_THRUST) -> tuple[np.ndarray
     return a_star, v_next
 
 
-def _levels(a_star: np.ndarray, dv: np.ndarray, n: np.ndarray) -> np.ndarray:
+def eq5_levels(a_star: np.ndarray, dv: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Eq. 5 as integer levels: floor(a* (n-1)) plus one when dv > 0, within [0, n-1]."""
     base = np.floor(a_star * (n - 1) + 1e-12)
     return np.clip(base + (dv > 0.0), 0, n - 1).astype(np.int64)
@@ -146,7 +148,7 @@ def fly_batch(
             # ours (option): compare with the velocity the optimal thrust would give next
             thr_star = lo + (hi - lo) * a_t
             v_ref = v_ref + (GRAVITY_MPS2 + thr_star / s[:, 6:7]) * DT_S
-        lev = _levels(a_t, v_t - v_ref, n)
+        lev = eq5_levels(a_t, v_t - v_ref, n)
         thr = lo + (hi - lo) * lev / (n - 1)
         nxt, r, te, la = transition(s, thr, zero, DT_S, REWARD, hi)
         states[:, t + 1] = np.where(alive[:, None], nxt, s)

@@ -23,11 +23,12 @@ STATE_DIM = 7  # [x, y, z, vx, vy, vz, m]: m, m/s, kg
 # Taylor coefficients of phi1(z) = sum z^(k-1)/k and phi2(z) = sum z^(k-2)/(k(k-1)), highest first
 # for Horner. z = mdot dt / m stays below 0.005 at dt = 0.2 s, so 9 terms reach machine precision
 # for any dt up to a few seconds.
-_PHI1 = tuple(1.0 / k for k in range(9, 0, -1))
-_PHI2 = tuple(1.0 / (k * (k - 1)) for k in range(10, 1, -1))
+PHI1 = tuple(1.0 / k for k in range(9, 0, -1))
+PHI2 = tuple(1.0 / (k * (k - 1)) for k in range(10, 1, -1))
 
 
-def _horner(coeffs: tuple[float, ...], z: np.ndarray) -> np.ndarray:
+def horner(coeffs: tuple[float, ...], z: np.ndarray) -> np.ndarray:
+    """Polynomial with `coeffs` (highest power first) at z: the phi series of `step` and the OCP."""
     out = np.full_like(z, coeffs[0])
     for c in coeffs[1:]:
         out *= z
@@ -82,8 +83,8 @@ def step(
     out = np.empty(np.broadcast_shapes(state.shape, u.shape[:-1] + (STATE_DIM,)), dtype=float)
     v0 = state[..., 3:6]
     gdt = GRAVITY_MPS2 * dt_col
-    out[..., 0:3] = state[..., 0:3] + dt_col * (v0 + 0.5 * gdt + a * _horner(_PHI2, z)[..., None])
-    out[..., 3:6] = v0 + gdt + a * _horner(_PHI1, z)[..., None]
+    out[..., 0:3] = state[..., 0:3] + dt_col * (v0 + 0.5 * gdt + a * horner(PHI2, z)[..., None])
+    out[..., 3:6] = v0 + gdt + a * horner(PHI1, z)[..., None]
     out[..., 6] = m0 - burn
     return out
 
@@ -121,11 +122,11 @@ def step_scalar(
         s = fuel_left / burn
         tx, ty, tz, burn = tx * s, ty * s, tz * s, fuel_left
     z = burn / m0
-    p1 = _PHI1[0]
-    for c in _PHI1[1:]:
+    p1 = PHI1[0]
+    for c in PHI1[1:]:
         p1 = p1 * z + c
-    p2 = _PHI2[0]
-    for c in _PHI2[1:]:
+    p2 = PHI2[0]
+    for c in PHI2[1:]:
         p2 = p2 * z + c
     k = dt_s / m0
     ax, ay, az = (tx + force_n[0]) * k, (ty + force_n[1]) * k, (tz + force_n[2]) * k

@@ -20,8 +20,8 @@ def results() -> list[ocp.OCPResult]:
 def test_eq5_picks_the_level_above_or_below() -> None:
     n = np.array([7.0, 7.0, 3.0])
     a = np.array([0.55, 0.55, 0.7])
-    assert disc._levels(a, np.array([1.0, -1.0, 0.0]), n).tolist() == [4, 3, 1]
-    assert disc._levels(np.ones(3), np.ones(3), n).tolist() == [6, 6, 2]  # clipped
+    assert disc.eq5_levels(a, np.array([1.0, -1.0, 0.0]), n).tolist() == [4, 3, 1]
+    assert disc.eq5_levels(np.ones(3), np.ones(3), n).tolist() == [6, 6, 2]  # clipped
 
 
 def test_7x7x3_demonstrations_land(results: list[ocp.OCPResult]) -> None:

@@ -1,0 +1,195 @@
+"""Fast method, fuel objective: LP passes in the control points, Brent's method on t_f, SLP polish.
+
+At fixed t_f, min sum_k w_k (p+ + p-) over T = T+ - T- (HiGHS) subject to the terminal state
+linearised with its exact Jacobian; t_f minimises that value by Brent's bounded method. Plain LP
+passes can cycle between two bang-bang vertices that each miss rest by up to ~1 m/s, so at the
+chosen t_f an elastic trust-region SLP (`fuel_slp`) with one-sided Jacobians at T = 0 converges
+to a schedule that reaches it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+from scipy.optimize import linprog, minimize_scalar
+
+from pd_core.ocp.model import (
+    EXHAUST_VELOCITY_MPS,
+    KN,
+    TF_MAX_S,
+    TF_MIN_S,
+    Flight,
+    Grid,
+    Problem,
+    SolverOutput,
+    SolveTimeout,
+)
+from pd_core.ocp.qp import INFEASIBLE, TfEval, WarmStart, cold_start
+
+# SLP: the thrust is split T = T+ - T- (T+, T- >= 0) and the terminal state is linearised in
+# each with its one-sided exact Jacobian (sign +1 for T+, -1 for T-), so switching on a thrust
+# that is 0 now counts its mass effect. Slacks on the 6 linearised terminal rows keep every LP
+# feasible; steps are accepted on the l1 merit fuel + mu |c| (mu above the multipliers, ~1 kg
+# per m/s) and the box |T' - T| <= delta adapts.
+_MERIT_MU = np.full(6, 50.0)  # kg per m, kg per m/s
+SLP_MAX_ITER = 60
+
+
+def fuel_weights(g: Grid) -> np.ndarray:
+    """w_k = sum_i dt_i W_ik / (Isp g0) (kg per N of control point k): the fuel of a schedule
+    whose adjacent control points share a sign (an upper bound on it otherwise)."""
+    return g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
+
+
+def fuel_lp_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
+    """(fuel kg, nan, p) at fixed t_f: LP passes from `st` (updated in place) subject to the
+    linearised terminal constraints."""
+    n = pb.n_control
+    g = pb.grid(t_f)
+    c = np.tile(fuel_weights(g), 6)  # [p+ axis 0, p- axis 0, p+ axis 1, ...]
+    bnds = []
+    for ax in range(3):
+        lo, hi = pb.limits.lo[ax] / KN, pb.limits.hi[ax] / KN
+        bnds += [(0.0, max(hi, 0.0))] * n + [(0.0, max(-lo, 0.0))] * n
+    p = st.p
+    for _ in range(passes):
+        jac, rhs, _ = pb.linearised(p, g)
+        a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n)
+        res = linprog(c, A_eq=a_eq, b_eq=rhs, bounds=bnds, method="highs")
+        if res.status != 0:
+            return INFEASIBLE
+        xs = res.x.reshape(3, 2, n)
+        p_new = (xs[:, 0] - xs[:, 1]).T * KN
+        change = np.abs(p_new - p).max()
+        p = p_new
+        if change < 1e-1:
+            break
+    st.p = p
+    st.evals += 1
+    return pb.fly(p, g).fuel, math.nan, p
+
+
+def _fuel_lp_step(
+    pb: Problem, p: np.ndarray, g: Grid, delta_kn: float
+) -> tuple[np.ndarray, float] | None:
+    """One elastic LP of the SLP at control points p (N, 3) N within a box of delta_kn kN.
+
+    Returns (p' (N, 3) N, predicted l1-merit reduction), None if HiGHS fails.
+    """
+    n = p.shape[0]
+    wsum = fuel_weights(g)
+    jp = pb.gradients(p, g, sign=1.0)
+    jm = pb.gradients(p, g, sign=-1.0)
+    a_plus = jp.dc_dp.transpose(0, 2, 1) * KN  # (6, 3, N) per kN
+    a_minus = -jm.dc_dp.transpose(0, 2, 1) * KN
+    cur = p.T / KN
+    pos, neg = np.maximum(cur, 0.0), np.maximum(-cur, 0.0)
+    rhs = np.einsum("oan,an->o", a_plus, pos) + np.einsum("oan,an->o", a_minus, neg) - jp.c
+    # columns: [T+ axis 0, T- axis 0, T+ axis 1, ...] (6N), then slacks s+ (6), s- (6)
+    a_thr = np.stack([a_plus, a_minus], axis=2).reshape(6, 6 * n)
+    eye = np.eye(6)
+    a_eq = np.concatenate([a_thr, eye, -eye], axis=1)
+    cost = np.concatenate([np.tile(wsum, 6) * KN, _MERIT_MU, _MERIT_MU])
+    lim = pb.limits
+    hi_pm = np.stack([np.maximum(lim.hi, 0.0), np.maximum(-lim.lo, 0.0)], 1) / KN
+    cur_pm = np.stack([pos, neg], axis=1)  # (3, 2, N)
+    lb = np.maximum(cur_pm - delta_kn, 0.0).reshape(-1)
+    ub = np.minimum(cur_pm + delta_kn, hi_pm[:, :, None]).reshape(-1)
+    lb = np.minimum(lb, ub)
+    bounds = np.stack(
+        [np.concatenate([lb, np.zeros(12)]), np.concatenate([ub, np.full(12, np.inf)])], 1
+    )
+    res = linprog(cost, A_eq=a_eq, b_eq=rhs, bounds=bounds, method="highs")
+    if res.status != 0:
+        return None
+    xs = res.x[: 6 * n].reshape(3, 2, n)
+    p_new = (xs[:, 0] - xs[:, 1]).T * KN
+    lin_now = float(np.tile(wsum, 6) @ cur_pm.reshape(-1)) * KN + _MERIT_MU @ np.abs(jp.c)
+    return p_new, lin_now - float(res.fun)
+
+
+def _merit(fl: Flight) -> float:
+    return fl.fuel + float(_MERIT_MU @ np.abs(np.concatenate([fl.xf, fl.vf])))
+
+
+def fuel_slp(
+    pb: Problem,
+    p: np.ndarray,
+    g: Grid,
+    max_iter: int = SLP_MAX_ITER,
+    delta_kn: float = 4.0,
+    tol_kg: float = 1e-6,
+    deadline: float = math.inf,
+) -> np.ndarray | None:
+    """Trust-region SLP on fuel at fixed t_f from p (N, 3) N; the best control points found."""
+    merit = _merit(pb.fly(p, g))
+    for _ in range(max_iter):
+        if time.perf_counter() > deadline:
+            raise SolveTimeout
+        step = _fuel_lp_step(pb, p, g, delta_kn)
+        if step is None:
+            return None
+        p_new, pred = step
+        merit_new = _merit(pb.fly(p_new, g))
+        actual = merit - merit_new
+        if pred <= tol_kg * max(merit, 1.0):
+            break  # the linearised merit cannot improve: a KKT point of the l1 problem
+        if actual >= 0.1 * pred:
+            moved = np.abs(p_new - p).max() / KN
+            p, merit = p_new, merit_new
+            if actual >= 0.75 * pred and moved >= 0.99 * delta_kn:
+                delta_kn = min(2.0 * delta_kn, 24.0)
+        else:
+            delta_kn *= 0.25
+            if delta_kn < 1e-6:
+                break
+    return p
+
+
+def tf_brent(f: Callable[[float], TfEval], tf0: float, tol_s: float) -> float | None:
+    """t_f minimising the fuel LP value by Brent's bounded method on [tf0 / 2, 2 tf0];
+    infeasible t_f (too short) get a penalty that falls with t_f so the search walks out."""
+
+    def val(t: float) -> float:
+        v, _, p = f(t)
+        return 1e6 - t if p is None else v
+
+    res = minimize_scalar(
+        val,
+        bounds=(max(TF_MIN_S, 0.5 * tf0), min(TF_MAX_S, 2.0 * tf0)),
+        method="bounded",
+        options={"xatol": tol_s},
+    )
+    return float(res.x) if res.fun < 1e5 else None
+
+
+def solve_fuel(
+    pb: Problem,
+    deadline: float = math.inf,
+    passes: int = 2,
+    final_passes: int = 8,
+    tf_tol_s: float = 2e-3,
+) -> SolverOutput:
+    """Free-final-time fuel optimum: `tf_brent` over `fuel_lp_at`, then `fuel_slp` at t_f."""
+    st, tf0 = cold_start(pb)
+
+    def f(t_f: float, n_pass: int = passes) -> TfEval:
+        if time.perf_counter() > deadline:
+            raise SolveTimeout
+        return fuel_lp_at(t_f, pb, st, n_pass)
+
+    try:
+        t_f = tf_brent(f, tf0, tf_tol_s * 5)
+        p = None if t_f is None else f(t_f, final_passes)[2]
+        if p is not None and t_f is not None:
+            p = fuel_slp(pb, p, pb.grid(t_f), deadline=deadline)
+    except SolveTimeout:
+        return SolverOutput(st.p, tf0, st.evals, "timed out", False)
+    if t_f is None or p is None:
+        return SolverOutput(
+            st.p, tf0, st.evals, "no feasible thrust schedule in the searched t_f range", False
+        )
+    return SolverOutput(p, t_f, st.evals, "converged", True)
