@@ -185,3 +185,61 @@ def success_vs_wall_time(runs: dict[str, str | Path], out: str | Path) -> Path:
     fig.savefig(out, dpi=90)
     plt.close(fig)
     return Path(out)
+
+
+def campaign_summary(t: dict[str, Any], out: str | Path) -> Path:
+    """A dispersion campaign (`pd_core.campaign.table`): success, 99th-percentile miss and median
+    fuel per scenario, one bar per agent."""
+    plt = _plt()
+    names = [d["name"] for d in t["scenarios"]]
+    agents = t["agents"]
+    panels = (
+        ("success_rate", "success (%)", 100.0),
+        ("miss_p99_m", "miss, 99th percentile (m)", 1.0),
+        ("fuel_median_kg", "median fuel (kg)", 1.0),
+    )
+    fig, ax = plt.subplots(len(panels), 1, figsize=(max(6, 0.9 * len(names) + 2), 8), sharex=True)
+    x = np.arange(len(names))
+    w = 0.8 / max(len(agents), 1)
+    for p, (key, label, scale) in enumerate(panels):
+        for j, a in enumerate(agents):
+            v = [t["results"][n][a][key] * scale for n in names]
+            ax[p].bar(x + (j - (len(agents) - 1) / 2) * w, v, w, label=a, color=f"C{j}")
+        ax[p].set_ylabel(label, fontsize=8)
+        ax[p].grid(axis="y", alpha=0.3)
+    lo = min(t["results"][n][a]["success_rate"] for n in names for a in agents) * 100
+    ax[0].set_ylim(max(0.0, lo - 5.0), 100.5)
+    ax[0].legend(fontsize=8, ncol=max(1, len(agents)))
+    ax[-1].set_xticks(x, names, rotation=30, ha="right")
+    ax[0].set_title(f"dispersion campaign: {t['episodes']} episodes per cell, seed {t['seed']}")
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+    return Path(out)
+
+
+def sweep_success_bands(
+    curves: dict[str, list[tuple[np.ndarray, np.ndarray]]], out: str | Path
+) -> Path:
+    """Success rate of periodic evaluations against wall time (min) for the configurations of a
+    sweep: a line per configuration (mean over seeds) with its seed band (min to max), on the
+    union of the seeds' evaluation times (each seed held at its last value)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for c, (name, runs) in enumerate(curves.items()):
+        runs = [(t, s) for t, s in runs if len(t)]
+        if not runs:
+            continue
+        grid = np.unique(np.concatenate([t for t, _ in runs]))
+        ys = np.array([np.interp(grid, t, s, left=np.nan) for t, s in runs])
+        with np.errstate(all="ignore"):
+            mean, lo, hi = np.nanmean(ys, 0), np.nanmin(ys, 0), np.nanmax(ys, 0)
+        ax.plot(grid, mean, "-", color=f"C{c}", label=f"{name} ({len(runs)} seeds)")
+        ax.fill_between(grid, lo, hi, color=f"C{c}", alpha=0.2, lw=0)
+    ax.set(xlabel="wall time (min)", ylabel="success rate (greedy eval)", ylim=(-0.02, 1.02))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return Path(out)

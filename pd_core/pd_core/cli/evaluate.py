@@ -1,10 +1,13 @@
-"""`pd-eval`: evaluate a trained policy or a reference controller like Table 7 of the paper.
+"""`pd-eval`: evaluate a trained policy or a reference controller like Table 7 of the paper,
+or run a dispersion campaign (every scenario for every agent), here or sharded over Ray.
 
 Examples:
     pd-eval models/pd_dqn_best.pt --episodes 1000 --seed 0
     pd-eval --controller zemzev --json
     pd-eval models/pd_dqn_best.pt --compare runs/paper-agent2__1__*/final.pt \\
         --training-log runs/best__1__*/episodes.csv --figures out/figs
+    pd-eval models/pd_dqn_best.pt --dispersions standard --compare zemzev=controller:zemzev
+    pd-eval models/pd_dqn_best.pt --episodes 100000 --ray [--shards 8] [--address auto]
 """
 
 from __future__ import annotations
@@ -12,10 +15,25 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from pd_core import plots
+from pd_core.campaign import format_table, load_actor, run_campaign, table, write_json
+from pd_core.config import DT_S
+from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
+from pd_core.evaluate import (
+    Rollouts,
+    format_report,
+    fuel_optimal_ratios,
+    rollout,
+    summarise,
+    to_json,
+)
+from pd_core.policy import PolicyLoadError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,19 +72,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="episodes.csv of training runs for Fig. 5",
     )
     p.add_argument("--name", help="name of the evaluated agent in the report")
+    g = p.add_argument_group("dispersion campaigns and Ray")
+    g.add_argument(
+        "--dispersions",
+        metavar="NAME|FILE.yaml",
+        help="run a campaign: every scenario (a name of pd_core.dispersions.SCENARIOS, a comma "
+        "list, 'standard' for all of them, or a YAML file) for every agent (the model and each "
+        "--compare); prints one table and writes campaign.json and campaign.png to --out",
+    )
+    g.add_argument("--out", help="folder for campaign.json/.png (default out/campaign-<time>)")
+    g.add_argument(
+        "--ray", action="store_true", help="fly the episodes as Ray tasks (same numbers)"
+    )
+    g.add_argument("--shards", type=int, help="Ray shards per scenario and agent (default: auto)")
+    g.add_argument(
+        "--address",
+        help="Ray cluster to join: auto or ray://host:port (default: a local Ray instance)",
+    )
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
-
-
-def load_actor(spec: str) -> tuple[Any, str]:
-    """A policy file or `controller:<name>`."""
-    if spec.startswith("controller:"):
-        from pd_core.controllers import make_controller
-
-        name = spec.split(":", 1)[1]
-        return make_controller(name), f"controller {name}"
-    from pd_core.policy import load_policy
-
-    return load_policy(spec), Path(spec).stem
 
 
 def _split(spec: str) -> tuple[str, str]:
@@ -78,27 +102,19 @@ def _split(spec: str) -> tuple[str, str]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from pd_core.evaluate import (
-        format_report,
-        fuel_optimal_ratios,
-        rollout,
-        summarise,
-        to_json,
-    )
-    from pd_core.policy import PolicyLoadError
-
     if bool(args.model) == bool(args.controller):
         print("pd-eval: give a model file or --controller (not both)", file=sys.stderr)
         return 2
+    spec = args.model or f"controller:{args.controller}"
     try:
-        actor, name = load_actor(args.model or f"controller:{args.controller}")
-    except (PolicyLoadError, ValueError) as exc:
+        actor, name = load_actor(spec)
+        if args.dispersions:
+            return campaign_main(args, spec, args.name or name)
+        ro = _rollouts(args, spec, actor)
+    except (PolicyLoadError, ValueError, RuntimeError) as exc:
         print(f"pd-eval: {exc}", file=sys.stderr)
         return 2
     name = args.name or name
-    ro = rollout(
-        actor, args.episodes, args.seed, disturbance=not args.no_disturbance, keep_trajectories=1
-    )
     fo = fuel_optimal_ratios(ro, args.fuel_optimal) if args.fuel_optimal > 0 else None
     summary = summarise(ro, fo)
     figures: dict[str, str] = {}
@@ -113,11 +129,75 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def write_figures(args: argparse.Namespace, actor: Any, name: str, ro: Any) -> dict[str, str]:
-    from pd_core import plots
-    from pd_core.config import DT_S
-    from pd_core.evaluate import rollout
+def _rollouts(args: argparse.Namespace, spec: str, actor: Any) -> Rollouts:
+    """The nominal evaluation, here (keeping episode 0's path) or as Ray shards."""
+    if not args.ray:
+        return rollout(
+            actor,
+            args.episodes,
+            args.seed,
+            disturbance=not args.no_disturbance,
+            keep_trajectories=1,
+        )
+    flown = _fly_campaign(args, {"agent": spec}, [NOMINAL])
+    ro = flown[NOMINAL.name]["agent"]
+    if args.figures:  # Fig. 6 needs episode 0's path, which shards do not return
+        first = rollout(
+            actor, 1, args.seed, disturbance=not args.no_disturbance, keep_trajectories=1
+        )
+        ro.trajectories, ro.actions = first.trajectories, first.actions
+    return ro
 
+
+def _fly_campaign(
+    args: argparse.Namespace, agents: dict[str, str], scenarios: list[Dispersions]
+) -> dict[str, dict[str, Rollouts]]:
+    common = {"disturbance": not args.no_disturbance, "progress": not args.no_progress}
+    if args.ray:
+        from pd_core.ray_campaign import run_campaign_ray  # imports Ray: only for --ray
+
+        return run_campaign_ray(
+            agents,
+            scenarios,
+            args.episodes,
+            args.seed,
+            shards=args.shards,
+            address=args.address,
+            **common,
+        )
+    return run_campaign(agents, scenarios, args.episodes, args.seed, **common)
+
+
+def campaign_main(args: argparse.Namespace, spec: str, name: str) -> int:
+    """Every scenario of --dispersions for the model and every --compare agent: one table."""
+    scenarios = load_scenarios(args.dispersions)
+    agents = {name: spec}
+    for other in args.compare:
+        other_name, other_spec = _split(other)
+        load_actor(other_spec)  # refuse a bad file before flying anything
+        agents[other_name] = other_spec
+    flown = _fly_campaign(args, agents, scenarios)
+    t = table(flown, scenarios, list(agents), args.seed, args.episodes)
+    out = Path(args.out or f"out/campaign-{time.strftime('%Y%m%d-%H%M%S')}")
+    t["files"] = {
+        "json": str(out / "campaign.json"),
+        "png": str(plots.campaign_summary(t, _mkdir(out) / "campaign.png")),
+    }
+    write_json(t, out / "campaign.json")
+    if args.json:
+        print(json.dumps(t, indent=2))
+    else:
+        print(format_table(t))
+        print(f"\nwrote {t['files']['json']} and {t['files']['png']}")
+    return 0
+
+
+def _mkdir(p: Path) -> Path:
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def write_figures(args: argparse.Namespace, actor: Any, name: str, ro: Any) -> dict[str, str]:
     out = Path(args.figures)
     out.mkdir(parents=True, exist_ok=True)
     figs: dict[str, str] = {}

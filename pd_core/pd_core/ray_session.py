@@ -1,0 +1,80 @@
+"""Joining Ray: a local instance sized to this machine by default, or an existing cluster.
+
+Only the Ray code paths (`pd-sweep`, `pd-eval --ray`) import this module; nothing else in
+pd_core needs Ray.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+from typing import Any
+from urllib.parse import urlsplit
+
+import ray  # optional heavy dependency: imported only by the Ray code paths
+
+CONNECT_TIMEOUT_S = 3.0
+
+
+class RayUnavailable(RuntimeError):
+    """Ray could not be started or joined; the message is one line for the user."""
+
+
+def connect(address: str | None = None, num_cpus: int | None = None) -> Any:
+    """Start a local Ray instance (`address` None, "" or "local"; `num_cpus` default: all of
+    this machine's) or join a cluster (`auto`, `host:port`, `ray://host:port`). Quiet logs.
+    Reuses a session this process already has. Returns the `ray` module."""
+    if ray.is_initialized():
+        return ray
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
+    try:
+        if not address or address == "local":
+            ray.init(
+                num_cpus=num_cpus or os.cpu_count() or 1,
+                include_dashboard=False,
+                configure_logging=True,
+                **quiet,
+            )
+        else:
+            _check_reachable(address)
+            ray.init(address=address, **quiet)
+    except RayUnavailable:
+        raise
+    except Exception as exc:  # noqa: BLE001 - ray raises many types; the user needs one line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RayUnavailable(f"cannot join the Ray cluster at {address!r}: {first}{_HINT}") from exc
+    return ray
+
+
+_HINT = (
+    " (start one with `ray start --head` and pass --address auto, or omit --address for a local"
+    " instance)"
+)
+
+
+def _check_reachable(address: str) -> None:
+    """Fail fast, in one line, when host:port of `address` does not accept connections."""
+    if address == "auto":
+        return  # ray looks for a local cluster itself and says so quickly when there is none
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError as exc:
+        raise RayUnavailable(f"bad Ray address {address!r}: {exc}{_HINT}") from exc
+    if not host or not port:
+        raise RayUnavailable(
+            f"bad Ray address {address!r}: expected auto, host:port or ray://host:port{_HINT}"
+        )
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise RayUnavailable(
+            f"no Ray cluster at {address}: {host}:{port} is not reachable ({reason}){_HINT}"
+        ) from exc
+
+
+def cluster_cpus() -> int:
+    """CPUs of the Ray session (after `connect`)."""
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
