@@ -1,78 +1,97 @@
 """pd_record: record topics to a rosbag2 bag (MCAP storage) with the `rosbags` library.
 
-    pd_record                                  # /lander/state /lander/thrust_cmd /lander/episode
+    pd_record                                  # lander/state lander/thrust_cmd lander/episode
     pd_record -o bags/run1 /lander/state /lander/thrust_cmd
     pd_record --duration 30 /lander/state
+    pd_record --ros-args -r __ns:=/vehicle1     # the stack of namespace /vehicle1
 
-Messages are taken as raw CDR (a raw subscription), so the bag holds exactly the bytes DDS
-carried, stamped with their receive time (as `ros2 bag record` does). Ctrl-C or SIGTERM stops
-recording: pending messages are drained, the bag is closed and its metadata.yaml written, so
-nothing received is lost. Topics of unknown type are looked up in the ROS graph.
+Messages are taken as raw CDR (raw subscriptions), so the bag holds exactly the bytes DDS carried,
+stamped with their receive time (as `ros2 bag record` does). The subscription callbacks only
+queue the bytes; a writer thread writes them and closes an MCAP chunk every `--flush` seconds, so
+a SIGKILL loses at most that much and the bag still opens (`pd_bringup.bag.read_bag`). Each
+publisher's sequence numbers are followed: a message that never reached the recorder (a gap) is
+counted and logged, and the exit status is then 1. Ctrl-C or SIGTERM stops recording within a
+second: what has arrived is written, the bag is closed and its metadata.yaml written. Each
+topic's offered QoS (from the ROS graph when its first message arrives) is stored in the bag.
+Relative topic names resolve in the recorder's namespace; topics of unknown type are looked up in
+the ROS graph.
 """
 
 from __future__ import annotations
 
 import argparse
+import queue
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rosbags.interfaces import Qos
 
-from pd_bringup.bag import LOOP_QOS, message_class, open_writer, type_name, typestore
+from pd_bringup.bag import bag_qos, flush_writer, message_class, open_writer, type_name, typestore
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_ros_common import names, qos
 
-KNOWN_TOPICS: dict[str, type] = {
-    "/lander/state": LanderState,
-    "/lander/thrust_cmd": ThrustCommand,
-    "/lander/episode": EpisodeResult,
+KNOWN_TYPES: dict[str, type] = {
+    names.STATE_TOPIC: LanderState,
+    names.COMMAND_TOPIC: ThrustCommand,
+    names.EPISODE_TOPIC: EpisodeResult,
 }
-DEFAULT_TOPICS = list(KNOWN_TOPICS)
-
-# Deep reader queue: a burst (lockstep runs) waits here rather than being dropped.
-RECORD_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+KNOWN_QOS = {names.EPISODE_TOPIC: qos.EPISODE_QOS}  # fallback when no publisher is seen
+STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most this long
 
 
 class Recorder(Node):
-    """Raw subscriptions writing into an open rosbags Writer (all on the executor thread)."""
+    """Raw subscriptions that only queue (topic index, receive time, bytes, publisher, seq)."""
 
-    def __init__(self, bag: Path, topics: list[str], discovery_timeout_s: float = 5.0) -> None:
+    def __init__(self, topics: list[str], sink: queue.SimpleQueue, discovery_s: float) -> None:
         super().__init__("pd_record")
-        self.bag = bag
-        self.counts: dict[str, int] = dict.fromkeys(topics, 0)
-        types = self._resolve_types(topics, discovery_timeout_s)
-        store = typestore()
-        self.writer = open_writer(bag)
-        self._conns: dict[str, Any] = {}
-        for topic, cls in types.items():
-            self._conns[topic] = self.writer.add_connection(
-                topic, type_name(cls), typestore=store, offered_qos_profiles=[LOOP_QOS]
+        known = {self.resolve_topic_name(t): cls for t, cls in KNOWN_TYPES.items()}
+        self.known_qos = {self.resolve_topic_name(t): p for t, p in KNOWN_QOS.items()}
+        self.topics = [self.resolve_topic_name(t) for t in topics]
+        self.types = self._resolve_types(self.topics, known, discovery_s)
+        self.lost_events = 0
+        for i, topic in enumerate(self.topics):
+            self.create_subscription(
+                self.types[topic],
+                topic,
+                self._queuer(sink, i),
+                qos.LOOP_SUB_QOS,
+                raw=True,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
             )
-            self.create_subscription(cls, topic, self._writer_for(topic), RECORD_QOS, raw=True)
-        self.get_logger().info(f"recording {', '.join(types)} to {bag}")
 
-    def _resolve_types(self, topics: list[str], timeout_s: float) -> dict[str, type]:
-        types = {t: KNOWN_TOPICS[t] for t in topics if t in KNOWN_TOPICS}
+    @staticmethod
+    def _queuer(sink: queue.SimpleQueue, index: int) -> Callable[[bytes, Any], None]:
+        put = sink.put
+
+        def on_message(raw: bytes, info: Any) -> None:
+            gid = info["publisher_gid"]["data"] if info.get("publisher_gid") else b""
+            put((index, time.time_ns(), raw, gid, info.get("publication_sequence_number")))
+
+        return on_message
+
+    def _on_lost(self, info: Any) -> None:
+        self.lost_events = int(info.total_count)
+
+    def _resolve_types(
+        self, topics: list[str], known: dict[str, type], timeout_s: float
+    ) -> dict[str, type]:
+        types = {t: known[t] for t in topics if t in known}
         deadline = time.monotonic() + timeout_s
-        while len(types) < len(topics):
-            for name, names in self.get_topic_names_and_types():
+        while len(types) < len(topics) and time.monotonic() < deadline:
+            for name, kinds in self.get_topic_names_and_types():
                 if name in topics and name not in types:
-                    types[name] = message_class(names[0])
-            if len(types) == len(topics) or time.monotonic() > deadline:
-                break
+                    types[name] = message_class(kinds[0])
             time.sleep(0.1)
         missing = [t for t in topics if t not in types]
         if missing:
@@ -80,26 +99,105 @@ class Recorder(Node):
                 f"pd_record: type of {', '.join(missing)} unknown (no publisher seen within "
                 f"{timeout_s:g} s)"
             )
-        return {t: types[t] for t in topics}
+        return types
 
-    def _writer_for(self, topic: str):
-        conn = self._conns[topic]
+    def offered_qos(self, topic: str) -> list[Qos]:
+        """QoS offered by the topic's publishers now (the stack's defaults if none is seen)."""
+        found = [bag_qos(i.qos_profile) for i in self.get_publishers_info_by_topic(topic)]
+        return found or [bag_qos(self.known_qos.get(topic, qos.LOOP_PUB_QOS))]
 
-        def write(raw: bytes) -> None:
-            self.writer.write(conn, time.time_ns(), raw)
-            self.counts[topic] += 1
-            if self.counts[topic] == 1:
-                self.get_logger().info(f"first message on {topic}")
 
-        return write
+class BagWriter(threading.Thread):
+    """Writes queued messages into the bag, closes a chunk every `flush_s`, follows gaps."""
+
+    def __init__(self, bag: Path, rec: Recorder, sink: queue.SimpleQueue, flush_s: float) -> None:
+        super().__init__(name="pd_record-writer", daemon=True)
+        self.bag, self.rec, self.sink, self.flush_s = bag, rec, sink, flush_s
+        self.writer = open_writer(bag)
+        self.store = typestore()
+        self.conns: dict[int, Any] = {}
+        self.counts = [0] * len(rec.topics)
+        self.gaps = [0] * len(rec.topics)
+        self.unwritten = 0
+        self._seq: dict[tuple[int, bytes], int] = {}
+        self._stop_at: float | None = None
+        self.error: BaseException | None = None
+
+    def stop(self) -> None:
+        """Write what is queued (at most STOP_DRAIN_S), then close the bag."""
+        self._stop_at = time.monotonic() + STOP_DRAIN_S
+
+    def run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # reported by main(); the bag is closed there
+            self.error = exc
+
+    def _loop(self) -> None:
+        next_flush = time.monotonic() + self.flush_s
+        while True:
+            try:
+                item = self.sink.get(timeout=0.05)
+            except queue.Empty:
+                item = None
+            now = time.monotonic()
+            if item is not None:
+                if self._stop_at is not None and now > self._stop_at:
+                    self.unwritten += 1 + self.sink.qsize()
+                    return
+                self._write(*item)
+            elif self._stop_at is not None:
+                return  # stop requested and the queue is empty
+            if now >= next_flush:
+                flush_writer(self.writer)
+                next_flush = now + self.flush_s
+
+    def _write(self, index: int, stamp: int, raw: bytes, gid: bytes, seq: int | None) -> None:
+        topic = self.rec.topics[index]
+        if index not in self.conns:
+            self._connect(index)
+            self.rec.get_logger().info(f"first message on {topic}")
+        self.writer.write(self.conns[index], stamp, raw)
+        self.counts[index] += 1
+        if seq is None:
+            return
+        last = self._seq.get((index, gid))
+        self._seq[(index, gid)] = max(seq, last or 0)
+        if last is not None and seq > last + 1:
+            self.gaps[index] += seq - last - 1
+            self.rec.get_logger().warning(
+                f"{seq - last - 1} message(s) of {topic} never reached the recorder (publisher "
+                f"sequence {last + 1}..{seq - 1}) [{self.gaps[index]} lost on this topic]"
+            )
+
+    def _connect(self, index: int) -> None:
+        topic = self.rec.topics[index]
+        self.conns[index] = self.writer.add_connection(
+            topic,
+            type_name(self.rec.types[topic]),
+            typestore=self.store,
+            offered_qos_profiles=self.rec.offered_qos(topic),
+        )
 
     def close(self) -> None:
+        for index in range(len(self.rec.topics)):  # topics never heard are in the bag too
+            if index not in self.conns:
+                self._connect(index)
         self.writer.close()
+
+    def summary(self) -> str:
+        parts = []
+        for i, topic in enumerate(self.rec.topics):
+            lost = f", {self.gaps[i]} LOST" if self.gaps[i] else ""
+            parts.append(f"{topic}: {self.counts[i]}{lost}")
+        if self.unwritten:
+            parts.append(f"{self.unwritten} queued at the stop deadline NOT WRITTEN")
+        return ", ".join(parts)
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     p = argparse.ArgumentParser(prog="pd_record", description=__doc__.split("\n\n")[0])
-    p.add_argument("topics", nargs="*", default=DEFAULT_TOPICS, help="topics to record")
+    p.add_argument("topics", nargs="*", default=list(names.LANDER_TOPICS), help="topics to record")
     p.add_argument(
         "-o",
         "--output",
@@ -109,6 +207,9 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     )
     p.add_argument(
         "--duration", type=float, default=0.0, help="stop after this many seconds (0 = Ctrl-C)"
+    )
+    p.add_argument(
+        "--flush", type=float, default=0.5, help="close an MCAP chunk every this many seconds"
     )
     p.add_argument(
         "--discovery-timeout",
@@ -125,45 +226,42 @@ def main(argv: list[str] | None = None) -> int:
     if bag.exists():
         print(f"pd_record: {bag} exists already; choose another --output", file=sys.stderr)
         return 2
+    if not args.flush > 0:
+        print(f"pd_record: --flush must be > 0, got {args.flush}", file=sys.stderr)
+        return 2
     bag.parent.mkdir(parents=True, exist_ok=True)
-
     stop = threading.Event()
-
-    def on_signal(signum: int, _frame: Any) -> None:
-        stop.set()
-
     # Our own handlers: rclpy's would shut the context down before the bag is closed.
     rclpy.init(args=["pd_record", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    node = None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    sink: queue.SimpleQueue = queue.SimpleQueue()
+    node = writer = None
     executor = SingleThreadedExecutor()
     try:
-        node = Recorder(bag, args.topics, args.discovery_timeout)
+        node = Recorder(args.topics, sink, args.discovery_timeout)
+        writer = BagWriter(bag, node, sink, args.flush)
+        writer.start()
         executor.add_node(node)
+        node.get_logger().info(f"recording {', '.join(node.topics)} to {bag}")
         t_end = time.monotonic() + args.duration if args.duration > 0 else float("inf")
-        while not stop.is_set() and time.monotonic() < t_end:
-            executor.spin_once(timeout_sec=0.1)
-        # Drain what already arrived (queued in our subscriptions) before closing: spin until
-        # nothing came for 0.3 s (at most 10 s).
-        hard_end = time.monotonic() + 10.0
-        quiet_since = time.monotonic()
-        total = sum(node.counts.values())
-        while time.monotonic() - quiet_since < 0.3 and time.monotonic() < hard_end:
+        while not stop.is_set() and time.monotonic() < t_end and writer.is_alive():
             executor.spin_once(timeout_sec=0.05)
-            if sum(node.counts.values()) != total:
-                total = sum(node.counts.values())
-                quiet_since = time.monotonic()
     finally:
         if node is not None:
-            node.close()
-            summary = ", ".join(f"{t}: {n}" for t, n in node.counts.items())
-            print(f"pd_record: closed {bag} ({summary})", flush=True)
             executor.remove_node(node)
-            node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()  # no more messages; what is queued gets written
+        executor.shutdown(timeout_sec=0.2)
+        if writer is not None:
+            writer.stop()
+            writer.join()
+            writer.close()
+            print(f"pd_record: closed {bag} ({writer.summary()})", flush=True)
         rclpy.try_shutdown()
-    return 0
+    if writer.error is not None:
+        print(f"pd_record: writing {bag} failed: {writer.error!r}", file=sys.stderr)
+        return 1
+    return 1 if any(writer.gaps) or writer.unwritten else 0
 
 
 if __name__ == "__main__":

@@ -5,9 +5,12 @@
     pd_replay bags/run1 --topics /lander/state --remap /lander/state:=/replay/state \
         --wait-subscribers 1
 
-The raw CDR bytes of the bag are published unchanged (RELIABLE, KEEP_LAST, VOLATILE, like the
-stack's publishers). `--wait-subscribers N` holds the first message until every replayed topic
-has N subscribers (with `--wait-timeout`), so nothing is published into the void.
+The raw CDR bytes of the bag are published unchanged, each topic with the QoS its recorded
+publishers offered (`offered_qos_profiles`: /lander/episode stays TRANSIENT_LOCAL, so a latched
+subscriber matches). A bag whose recorder was killed (no metadata.yaml, no MCAP footer) is
+recovered up to its last complete chunk; a bag that cannot be read at all is one line on stderr
+(exit status 2). `--wait-subscribers N` holds the first message until every replayed topic has
+N subscribers (with `--wait-timeout`), so nothing is published into the void.
 """
 
 from __future__ import annotations
@@ -21,17 +24,8 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.rosbag2 import Reader
 
-from pd_bringup.bag import message_class, read_messages
-
-REPLAY_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=100,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+from pd_bringup.bag import BagError, message_class, read_bag, replay_qos
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
@@ -74,12 +68,18 @@ def main(argv: list[str] | None = None) -> int:
             print(f"pd_replay: --remap wants FROM:=TO, got {r!r}", file=sys.stderr)
             return 2
         remap[src] = dst
-    with Reader(args.bag) as reader:
-        types = {
-            c.topic: c.msgtype
-            for c in reader.connections
-            if args.topics is None or c.topic in args.topics
-        }
+    try:
+        bag = read_bag(args.bag, args.topics)
+    except (BagError, OSError, ValueError, KeyError) as exc:
+        print(f"pd_replay: cannot read {args.bag}: {exc}", file=sys.stderr)
+        return 2
+    types = {t: v for t, v in bag.topics.items() if args.topics is None or t in args.topics}
+    if bag.recovered:
+        print(
+            f"pd_replay: {args.bag} has no metadata or footer (recorder killed?); "
+            f"recovered {len(bag.messages)} messages",
+            flush=True,
+        )
     if not types:
         print(f"pd_replay: no matching topics in {args.bag}", file=sys.stderr)
         return 2
@@ -89,8 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     sent = 0
     try:
         pubs = {
-            t: node.create_publisher(message_class(m), remap.get(t, t), REPLAY_QOS)
-            for t, m in types.items()
+            t: node.create_publisher(message_class(m), remap.get(t, t), replay_qos(offered))
+            for t, (m, offered) in types.items()
         }
         if args.wait_subscribers > 0:
             deadline = time.monotonic() + args.wait_timeout
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(0.05)
         t0_wall = time.monotonic()
         t0_bag = None
-        for topic, _, stamp, raw in read_messages(args.bag, list(types)):
+        for topic, stamp, raw in bag.messages:
             if t0_bag is None:
                 t0_bag = stamp
             delay = t0_wall + (stamp - t0_bag) * 1e-9 / args.rate - time.monotonic()

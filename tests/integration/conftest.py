@@ -6,8 +6,8 @@ At import (before any ``rclpy.init``) this conftest claims a ROS domain id that 
 session on this machine holds, and exports it as ``ROS_DOMAIN_ID``: the test process and every
 node process it starts (they inherit ``os.environ``) share that domain, and two test runs at the
 same time (or a demo on the default domain 0) never hear each other. A domain is claimed by an
-exclusive ``flock`` on ``$TMPDIR/pd_ros_domains/<id>.lock`` held until the session ends; ids run
-1..101 (0 is everyone's default; above 101 FastDDS ports meet Linux's ephemeral range).
+exclusive ``flock`` held until the session ends (``pd_ros_common.domain.claim_domain_id``, shared
+with ``pd_demo``).
 Set ``PD_TEST_ROS_DOMAIN_ID=<id>`` to force one (for example to watch a test from another shell).
 
 Discovery is kept on loopback (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) and FastDDS is the
@@ -26,42 +26,14 @@ Fixtures
 
 from __future__ import annotations
 
-import fcntl
 import os
-import tempfile
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import pytest
+from pd_ros_common.domain import claim_domain_id
 
-_DOMAIN_MIN, _DOMAIN_MAX = 1, 101
-
-
-def _claim_domain_id() -> tuple[int, int | None]:
-    """Return (domain id, fd of the held lock); the lock lives as long as this process."""
-    forced = os.environ.get("PD_TEST_ROS_DOMAIN_ID")
-    if forced:
-        return int(forced), None
-    lock_dir = Path(tempfile.gettempdir()) / "pd_ros_domains"
-    lock_dir.mkdir(mode=0o777, exist_ok=True)
-    span = _DOMAIN_MAX - _DOMAIN_MIN + 1
-    start = os.getpid() % span
-    for i in range(span):
-        domain = _DOMAIN_MIN + (start + i) % span
-        fd = os.open(lock_dir / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        return domain, fd
-    raise RuntimeError(
-        f"no free ROS domain id in {_DOMAIN_MIN}..{_DOMAIN_MAX} (locks in {lock_dir})"
-    )
-
-
-ROS_DOMAIN_ID, _domain_lock_fd = _claim_domain_id()
+ROS_DOMAIN_ID, _domain_lock_fd = claim_domain_id("PD_TEST_ROS_DOMAIN_ID")
 os.environ["ROS_DOMAIN_ID"] = str(ROS_DOMAIN_ID)
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
