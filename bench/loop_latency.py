@@ -25,6 +25,19 @@ import time
 from pathlib import Path
 
 import numpy as np
+import rclpy
+from pd_ros_common.convert import state_msg
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.process import Supervisor
+from pd_ros_common.qos import LOOP_PUB_QOS, LOOP_SUB_QOS
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from pd_core.sim import Command, Simulator, percentiles_ms
+from pd_interfaces.msg import LanderState, ThrustCommand
+from pd_policy_node.node import default_model_path
+from pd_ros_common import names
 
 
 def parse_args() -> argparse.Namespace:
@@ -41,12 +54,10 @@ def parse_args() -> argparse.Namespace:
 def model_path(arg: str, tmp: Path) -> tuple[str, str]:
     if arg:
         return arg, "given"
-    from pd_policy_node.node import default_model_path
-
     shipped = default_model_path()
     if shipped.is_file():
         return str(shipped), "shipped"
-    import torch
+    import torch  # optional heavy dependency: only without a shipped model
 
     from pd_core.dqn.network import QNetwork
     from pd_core.policy import save_policy
@@ -57,55 +68,30 @@ def model_path(arg: str, tmp: Path) -> tuple[str, str]:
 
 def main() -> int:
     args = parse_args()
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-
-    from pd_bringup.demo import Child, claim_domain_id, executable
-    from pd_core.sim import Command, Simulator, percentiles_ms
-    from pd_interfaces.msg import LanderState, ThrustCommand
-    from pd_policy_node.node import LOOP_QOS
-    from pd_sim_node.convert import state_msg
-
     tmp = Path(tempfile.mkdtemp(prefix="pd_bench_"))
-    domain, _lock = claim_domain_id()
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1"}
+    domain, _lock = claim_domain_id("ROS_DOMAIN_ID")
+    sup = Supervisor(tmp, {"ROS_DOMAIN_ID": str(domain)})
     model, model_kind = model_path(args.model, tmp)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = Node("pd_bench", context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    children: list[Child] = []
     report: dict = {"model": model_kind, "cpu_count": os.cpu_count()}
     try:
         # ------------------------------------------------------------ 1. latency
-        pol = Child(
-            "pd_policy_node",
-            [
-                executable("pd_policy_node", "pd_policy_node"),
-                "--ros-args",
-                "-p",
-                f"model_path:={model}",
-                "-p",
-                "stats_period_s:=0.0",
-            ],
-            tmp,
-            env,
-        )
-        children.append(pol)
+        pol = sup.node("pd_policy_node", {"model_path": model, "stats_period_s": 0.0})
         got: list[tuple[float, ThrustCommand]] = []
         node.create_subscription(
             ThrustCommand,
-            "/lander/thrust_cmd",
+            names.COMMAND_TOPIC,
             lambda m: got.append((time.perf_counter(), m)),
-            LOOP_QOS,
+            LOOP_SUB_QOS,
         )
-        pub = node.create_publisher(LanderState, "/lander/state", LOOP_QOS)
+        pub = node.create_publisher(LanderState, names.STATE_TOPIC, LOOP_PUB_QOS)
         deadline = time.monotonic() + 60
-        while pub.get_subscription_count() < 1 or node.count_publishers("/lander/thrust_cmd") < 1:
-            if time.monotonic() > deadline or not pol.alive():
+        while pub.get_subscription_count() < 1 or node.count_publishers(names.COMMAND_TOPIC) < 1:
+            if time.monotonic() > deadline or not pol.alive:
                 print(f"policy node did not come up:\n{pol.tail()}", file=sys.stderr)
                 return 1
             ex.spin_once(timeout_sec=0.05)
@@ -150,25 +136,22 @@ def main() -> int:
             arrivals: list[float] = []
             node.create_subscription(
                 LanderState,
-                "/lander/state",
+                names.STATE_TOPIC,
                 lambda m: arrivals.append(time.monotonic()),
-                LOOP_QOS,
+                LOOP_SUB_QOS,
             )
-            simp = Child(
+            # No policy here: the simulator flies at once (start_wait_s 0), holding zero thrust.
+            simp = sup.node(
                 "pd_sim_node",
-                [
-                    executable("pd_sim_node", "pd_sim_node"),
-                    "--ros-args",
-                    "-p",
-                    "auto_restart:=true",
-                ],
-                tmp,
-                env,
+                {
+                    "auto_restart": True,
+                    "start_wait_s": 0.0,
+                    "tick_priority": args.tick_priority,
+                },
             )
-            children.append(simp)
             deadline = time.monotonic() + 60
             while len(arrivals) < 3:
-                if time.monotonic() > deadline or not simp.alive():
+                if time.monotonic() > deadline or not simp.alive:
                     print(f"simulator did not come up:\n{simp.tail()}", file=sys.stderr)
                     return 1
                 ex.spin_once(timeout_sec=0.05)
@@ -190,8 +173,7 @@ def main() -> int:
             )
         print(json.dumps(report))
     finally:
-        for c in children:
-            c.stop()
+        sup.stop_all()
         ex.remove_node(node)
         node.destroy_node()
         ex.shutdown(timeout_sec=1.0)

@@ -2,10 +2,14 @@
 
     ros2 launch pd_bringup stack.launch.py
     ros2 launch pd_bringup stack.launch.py lockstep:=true seed:=7 model_path:=/path/to/model.pt
+    ros2 launch pd_bringup stack.launch.py namespace:=/vehicle1 controller:=zemzev
 
 Parameters come from share/pd_bringup/config/{sim,policy,ocp}.yaml; the launch arguments below
-override a few of them. Needs a full ROS 2 install (`launch`, `launch_ros`); on machines without
-them (pip wheels), `pd_demo` starts the same three processes (see the README).
+override a few of them. Topic and service names are relative: with `namespace` (default: the
+root), the whole stack lives under it (/vehicle1/lander/state, /vehicle1/sim/reset, ...), so two
+stacks share a ROS domain without hearing each other. Needs a full ROS 2 install (`launch`,
+`launch_ros`); on machines without them (pip wheels), `pd_demo` starts the same three processes
+(see the README).
 """
 
 from __future__ import annotations
@@ -25,8 +29,18 @@ def generate_launch_description() -> LaunchDescription:
     lockstep = LaunchConfiguration("lockstep")
     seed = LaunchConfiguration("seed")
     model_path = LaunchConfiguration("model_path")
+    controller = LaunchConfiguration("controller")
+    namespace = LaunchConfiguration("namespace")
     return LaunchDescription(
         [
+            DeclareLaunchArgument(
+                "namespace", default_value="", description="namespace of the whole stack"
+            ),
+            DeclareLaunchArgument(
+                "controller",
+                default_value="dqn",
+                description="pd_policy_node controller: dqn, zemzev, mpc-fuel, mpc-energy",
+            ),
             DeclareLaunchArgument(
                 "lockstep", default_value="false", description="pd_sim_node lockstep mode"
             ),
@@ -42,6 +56,7 @@ def generate_launch_description() -> LaunchDescription:
                 package="pd_sim_node",
                 executable="pd_sim_node",
                 name="pd_sim_node",
+                namespace=namespace,
                 output="screen",
                 parameters=[
                     os.path.join(config, "sim.yaml"),
@@ -55,16 +70,21 @@ def generate_launch_description() -> LaunchDescription:
                 package="pd_policy_node",
                 executable="pd_policy_node",
                 name="pd_policy_node",
+                namespace=namespace,
                 output="screen",
                 parameters=[
                     os.path.join(config, "policy.yaml"),
-                    {"model_path": ParameterValue(model_path, value_type=str)},
+                    {
+                        "model_path": ParameterValue(model_path, value_type=str),
+                        "controller": ParameterValue(controller, value_type=str),
+                    },
                 ],
             ),
             Node(
                 package="pd_ocp_node",
                 executable="pd_ocp_node",
                 name="pd_ocp_node",
+                namespace=namespace,
                 output="screen",
                 parameters=[os.path.join(config, "ocp.yaml")],
             ),

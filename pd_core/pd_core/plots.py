@@ -243,3 +243,49 @@ def sweep_success_bands(
     fig.savefig(out, dpi=90)
     plt.close(fig)
     return Path(out)
+
+
+def flight_vs_ocp(
+    path: str | Path,
+    states: np.ndarray,
+    thrust: np.ndarray,
+    ocp: dict[str, np.ndarray] | None,
+    title: str,
+    dt_s: float = 0.2,
+    flight_label: str = "flight over ROS 2",
+) -> Path:
+    """A flight (left: states (N+1, 7) every dt_s, thrust (N, 3) held over each step) beside the
+    OCP trajectory (right: `ocp` dict with state_times, states, control_times, thrust, or None):
+    position, velocity and thrust against time."""
+    plt = _plt()
+    t = np.arange(len(states)) * dt_s
+    none = {"state_times": t[:0], "states": np.zeros((0, 7))}
+    ocp = ocp or {**none, "control_times": t[:0], "thrust": np.zeros((0, 3))}
+    fig, ax = plt.subplots(3, 2, figsize=(12, 9), sharex=True, sharey="row")
+    names = ("i (downrange)", "j (crossrange)", "k (altitude)")
+    cols = [
+        (flight_label, t, states, t[: len(thrust)], thrust, "post"),
+        ("optimal trajectory", ocp["state_times"], ocp["states"], ocp["control_times"],
+         ocp["thrust"], None),
+    ]  # fmt: skip
+    for c, (head, ts, s, tu, u, where) in enumerate(cols):
+        for k in range(3):
+            if len(s):
+                ax[0, c].plot(ts, s[:, k], label=names[k])
+                ax[1, c].plot(ts, s[:, 3 + k], label=names[k])
+            if len(u) and where:
+                ax[2, c].step(tu, u[:, k], where=where, label=f"T{k + 1}")
+            elif len(u):
+                ax[2, c].plot(tu, u[:, k], ".-", ms=3, label=f"T{k + 1}")
+        ax[0, c].set_title(head)
+        for r, ylabel in enumerate(("position (m)", "velocity (m/s)", "thrust (N)")):
+            ax[r, c].axhline(0.0, color="grey", lw=0.7)
+            ax[r, c].legend(fontsize=7)
+            if c == 0:
+                ax[r, c].set_ylabel(ylabel)
+        ax[2, c].set_xlabel("time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return Path(path)

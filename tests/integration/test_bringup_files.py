@@ -30,7 +30,7 @@ BRINGUP = Path(__file__).resolve().parents[2] / "pd_bringup"
 )
 def test_yaml_holds_declared_defaults(file, node, params):
     data = yaml.safe_load((BRINGUP / "config" / file).read_text())
-    values = data[f"/{node}"]["ros__parameters"]
+    values = data[f"/**/{node}"]["ros__parameters"]
     assert set(values) == set(params)
     for name, spec in params.items():
         assert values[name] == spec[0], name

@@ -1,0 +1,135 @@
+"""A flight client: one node that resets the simulator, asks the OCP, and follows an episode.
+
+Used by pd_demo (and usable from a notebook): it owns its rclpy context, spins its own executor in
+short slices (never a bare spin), and keeps every state, command and result it hears.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import rclpy
+from pd_ros_common.convert import (
+    from_vec3,
+    ocp_request,
+    ocp_trajectory,
+    reset_request,
+    state_from_msg,
+    state_vector,
+)
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
+from pd_ros_common import names, qos
+
+
+class FlightError(RuntimeError):
+    """The stack did not answer in time or refused."""
+
+
+class FlightClient:
+    """States, commands and results of the stack in `namespace`; reset and OCP clients."""
+
+    def __init__(self, domain_id: int | None = None, namespace: str = "/") -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = Node("pd_flight_client", namespace=namespace, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.states: list[LanderState] = []
+        self.commands: list[ThrustCommand] = []
+        self.results: list[EpisodeResult] = []
+        sub = self.node.create_subscription
+        sub(LanderState, names.STATE_TOPIC, self.states.append, qos.LOOP_SUB_QOS)
+        sub(ThrustCommand, names.COMMAND_TOPIC, self.commands.append, qos.LOOP_SUB_QOS)
+        sub(EpisodeResult, names.EPISODE_TOPIC, self.results.append, qos.EPISODE_QOS)
+        self.reset_cli = self.node.create_client(
+            ResetEpisode, names.RESET_SERVICE, qos_profile=qos.SERVICE_QOS
+        )
+        self.ocp_cli = self.node.create_client(
+            ComputeTrajectory, names.OCP_SERVICE, qos_profile=qos.SERVICE_QOS
+        )
+
+    # ------------------------------------------------------------------ spinning
+    def spin_until(
+        self, predicate: Callable[[], bool], timeout_s: float, check: Callable[[], None] = None
+    ) -> bool:
+        """Spin until `predicate()` or the deadline; `check()` may raise (a child died)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            if check is not None:
+                check()
+            self.executor.spin_once(timeout_sec=0.05)
+        return bool(predicate())
+
+    def call(self, client: Any, request: Any, timeout_s: float) -> Any:
+        future = client.call_async(request)
+        if not self.spin_until(future.done, timeout_s):
+            raise FlightError(f"{client.srv_name}: no answer within {timeout_s:g} s")
+        return future.result()
+
+    def stack_ready(self, listeners: int = 2) -> bool:
+        """Both services up, a policy publishing commands, and `listeners` subscribers of the
+        state and command topics besides this client (policy + recorder, simulator + recorder)."""
+        n = self.node
+        return (
+            self.reset_cli.service_is_ready()
+            and self.ocp_cli.service_is_ready()
+            and n.count_publishers(names.COMMAND_TOPIC) >= 1
+            and n.count_subscribers(names.STATE_TOPIC) >= listeners + 1
+            and n.count_subscribers(names.COMMAND_TOPIC) >= listeners + 1
+        )
+
+    # ------------------------------------------------------------------ the flight
+    def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:
+        """(episode, initial state) of a new episode, as the simulator reports it."""
+        resp = self.call(self.reset_cli, reset_request(state, seed), 10.0)
+        if not resp.success:
+            raise FlightError(f"{names.RESET_SERVICE} refused: {resp.message}")
+        return resp.episode, state_vector(resp.position, resp.velocity, resp.mass)
+
+    def solve_ocp(self, state: np.ndarray, timeout_s: float = 120.0, **fields: Any) -> Any:
+        return self.call(self.ocp_cli, ocp_request(state, **fields), timeout_s)
+
+    def result_of(
+        self, episode: int, timeout_s: float, check: Callable[[], None] | None = None
+    ) -> EpisodeResult:
+        """The episode's result, once it and all its states have arrived."""
+        if not self.spin_until(lambda: self._result(episode) is not None, timeout_s, check):
+            raise FlightError(f"episode {episode} did not end within {timeout_s:g} s")
+        result = self._result(episode)
+        # The result comes from another writer than the states: let the last ones arrive.
+        self.spin_until(lambda: len(self.trajectory(episode)[0]) > result.steps, 5.0)
+        return result
+
+    def _result(self, episode: int) -> EpisodeResult | None:
+        return next((r for r in self.results if r.episode == episode), None)
+
+    def trajectory(self, episode: int) -> tuple[np.ndarray, np.ndarray]:
+        """(states (N+1, 7) by step, thrust (N, 3) by step with NaN where no command was heard)."""
+        by_step = {s.step: s for s in self.states if s.episode == episode}
+        states = np.array([state_from_msg(by_step[k]) for k in sorted(by_step)]).reshape(-1, 7)
+        cmds = {c.step: c for c in self.commands if c.episode == episode}
+        n = max(len(states) - 1, 0)
+        thrust = np.array(
+            [from_vec3(cmds[k].thrust) if k in cmds else [np.nan] * 3 for k in range(n)]
+        )
+        return states, thrust.reshape(-1, 3)
+
+    @staticmethod
+    def ocp_arrays(response: Any) -> dict[str, np.ndarray] | None:
+        return ocp_trajectory(response) if response is not None and response.success else None
+
+    def close(self) -> None:
+        self.executor.remove_node(self.node)
+        self.node.destroy_node()
+        self.executor.shutdown(timeout_sec=1.0)
+        self.context.try_shutdown()
