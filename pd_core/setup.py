@@ -27,6 +27,7 @@ setup(
             "pd-ocp = pd_core.cli.ocp:main",
             "pd-train = pd_core.cli.train:main",
             "pd-eval = pd_core.cli.evaluate:main",
+            "pd-sweep = pd_core.cli.sweep:main",
         ],
     },
 )
