@@ -17,6 +17,7 @@ ray = pytest.importorskip("ray")
 from pd_core.campaign import run_campaign  # noqa: E402
 from pd_core.cli import evaluate as pd_eval  # noqa: E402
 from pd_core.cli import sweep as pd_sweep  # noqa: E402
+from pd_core.controllers import ZemZevController  # noqa: E402
 from pd_core.dispersions import SCENARIOS  # noqa: E402
 from pd_core.evaluate import rollout  # noqa: E402
 from pd_core.ray_campaign import run_campaign_ray  # noqa: E402
@@ -63,8 +64,6 @@ def test_sharded_campaign_equals_unsharded_exactly(local_ray):
             assert len(sharded[d.name][a].landed) == 96
             _assert_same(sharded[d.name][a], here[d.name][a])
     # the nominal cell is the plain evaluation, episode i on seed 40 + i
-    from pd_core.controllers import ZemZevController
-
     _assert_same(here["nominal"]["zemzev"], rollout(ZemZevController(), 96, 40))
 
 

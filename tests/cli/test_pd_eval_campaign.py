@@ -1,0 +1,40 @@
+"""pd-eval --dispersions: one table of every scenario x every agent, its JSON and PNG."""
+
+from __future__ import annotations
+
+import json
+
+from pd_core.cli import evaluate as pd_eval
+
+
+def test_campaign_table_json_and_png(tmp_path, capsys):
+    out = tmp_path / "camp"
+    argv = ["--controller", "zemzev", "--name", "zz", "--episodes", "40", "--seed", "3"]
+    argv += ["--dispersions", "nominal,delay,all", "--compare", "again=controller:zemzev"]
+    assert pd_eval.main(argv + ["--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    for word in ("scenario", "success %", "miss p99 m", "worst vk m/s", "fuel p50 kg", "delay"):
+        assert word in text
+    t = json.loads((out / "campaign.json").read_text())
+    assert [d["name"] for d in t["scenarios"]] == ["nominal", "delay", "all"]
+    assert t["agents"] == ["zz", "again"]
+    for name in ("nominal", "delay", "all"):
+        a, b = t["results"][name]["zz"], t["results"][name]["again"]
+        assert a == b  # the same controller on the same seeds: the same numbers
+        assert a["episodes"] == 40 and 0.0 <= a["success_rate"] <= 1.0
+        assert a["miss_median_m"] <= a["miss_p99_m"]
+    assert t["results"]["nominal"]["zz"]["success_rate"] == 1.0
+    assert t["results"]["all"]["zz"]["success_rate"] < 1.0  # the combined case bites
+    assert (out / "campaign.png").stat().st_size > 5000
+
+
+def test_campaign_from_yaml_and_refusals(tmp_path, capsys):
+    f = tmp_path / "mine.yaml"
+    f.write_text("scenarios:\n  - {name: heavy, mass_kg: [2150, 2250]}\n")
+    argv = ["--controller", "zemzev", "--episodes", "20", "--dispersions", str(f), "--json"]
+    assert pd_eval.main(argv + ["--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    t = json.loads(capsys.readouterr().out)
+    assert list(t["results"]) == ["heavy"]
+    assert t["scenarios"][0]["mass_kg"] == [2150.0, 2250.0]
+    assert pd_eval.main(["--controller", "zemzev", "--dispersions", "windy"]) == 2
+    assert "unknown dispersion scenario" in capsys.readouterr().err
