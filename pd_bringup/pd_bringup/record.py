@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from pd_ros_common.gaps import SequenceGaps
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -51,7 +52,7 @@ STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most thi
 
 
 class Recorder(Node):
-    """Raw subscriptions that only queue (topic index, receive time, bytes, publisher, seq)."""
+    """Raw subscriptions that only queue (topic index, receive time, bytes, message info)."""
 
     def __init__(self, topics: list[str], sink: queue.SimpleQueue, discovery_s: float) -> None:
         super().__init__("pd_record")
@@ -75,8 +76,7 @@ class Recorder(Node):
         put = sink.put
 
         def on_message(raw: bytes, info: Any) -> None:
-            gid = info["publisher_gid"]["data"] if info.get("publisher_gid") else b""
-            put((index, time.time_ns(), raw, gid, info.get("publication_sequence_number")))
+            put((index, time.time_ns(), raw, info))
 
         return on_message
 
@@ -119,7 +119,7 @@ class BagWriter(threading.Thread):
         self.counts = [0] * len(rec.topics)
         self.gaps = [0] * len(rec.topics)
         self.unwritten = 0
-        self._seq: dict[tuple[int, bytes], int] = {}
+        self._gaps = [SequenceGaps() for _ in rec.topics]
         self._stop_at: float | None = None
         self.error: BaseException | None = None
 
@@ -152,22 +152,19 @@ class BagWriter(threading.Thread):
                 flush_writer(self.writer)
                 next_flush = now + self.flush_s
 
-    def _write(self, index: int, stamp: int, raw: bytes, gid: bytes, seq: int | None) -> None:
+    def _write(self, index: int, stamp: int, raw: bytes, info: Any) -> None:
         topic = self.rec.topics[index]
         if index not in self.conns:
             self._connect(index)
             self.rec.get_logger().info(f"first message on {topic}")
         self.writer.write(self.conns[index], stamp, raw)
         self.counts[index] += 1
-        if seq is None:
-            return
-        last = self._seq.get((index, gid))
-        self._seq[(index, gid)] = max(seq, last or 0)
-        if last is not None and seq > last + 1:
-            self.gaps[index] += seq - last - 1
+        missing, first, last = self._gaps[index].update(info)
+        if missing:
+            self.gaps[index] += missing
             self.rec.get_logger().warning(
-                f"{seq - last - 1} message(s) of {topic} never reached the recorder (publisher "
-                f"sequence {last + 1}..{seq - 1}) [{self.gaps[index]} lost on this topic]"
+                f"{missing} message(s) of {topic} never reached the recorder (publisher "
+                f"sequence {first}..{last}) [{self.gaps[index]} lost on this topic]"
             )
 
     def _connect(self, index: int) -> None:

@@ -137,9 +137,9 @@ class PolicyNode(Node):
             self._connect_timer.cancel()
 
     def _on_lost(self, info: Any) -> None:
-        self.lost = int(info.total_count)
+        self.lost += int(info.total_count_change)
         self.get_logger().warning(
-            f"{info.total_count_change} state(s) lost before delivery ({self.lost} in all)"
+            f"{info.total_count_change} state(s) reported lost by DDS [{self.lost} lost so far]"
         )
 
     def _count_gap(self, msg: LanderState) -> None:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
+from pd_ros_common.gaps import SequenceGaps
 from pd_ros_common.run import run_node
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -143,7 +144,8 @@ class SimNode(Node):
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command
         self._last_publish = time.monotonic()
         self._lateness: list[float] = []
-        self.lost_commands = 0
+        self.lost_commands = 0  # never arrived: sequence gaps plus DDS message-lost events
+        self._gaps = SequenceGaps()
 
         self._state_pub = self.create_publisher(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS)
         self._episode_pub = self.create_publisher(
@@ -185,11 +187,12 @@ class SimNode(Node):
             )
 
     def _on_lost(self, info: Any) -> None:
-        """Commands DDS lost before they reached us (a queue overflowed): count and log."""
-        self.lost_commands = int(info.total_count)
-        self.get_logger().warning(
-            f"{info.total_count_change} command(s) lost before delivery ({info.total_count} in all)"
-        )
+        """Commands DDS reports lost before they reached us: count and log."""
+        self._count_lost(int(info.total_count_change), "reported lost by DDS")
+
+    def _count_lost(self, n: int, how: str) -> None:
+        self.lost_commands += n
+        self.get_logger().warning(f"{n} command(s) {how} [{self.lost_commands} lost so far]")
 
     # ------------------------------------------------------------------ episodes
     def _start_episode(self, initial_state: np.ndarray | None, seed: int | None, wait: bool) -> int:
@@ -296,7 +299,10 @@ class SimNode(Node):
         )
 
     # ------------------------------------------------------------------ callbacks
-    def _on_command(self, msg: ThrustCommand) -> None:
+    def _on_command(self, msg: ThrustCommand, info: Any) -> None:
+        missing, first, last = self._gaps.update(info)
+        if missing:  # a sender's queue overflowed: those commands never reached us
+            self._count_lost(missing, f"of one publisher never arrived (sequence {first}..{last})")
         cmd = command_from_msg(msg)
         with self._lock:
             err = self._sim.submit(cmd)

@@ -15,7 +15,10 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Vector3
 from helpers import ProcessSet
-from rcl_interfaces.srv import GetParameters
+from pd_ros_common.convert import ocp_request
+from pd_ros_common.qos import SERVICE_QOS
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.parameter import Parameter
 
 from pd_core.config import PAPER_TABLE4, TABLE1
 from pd_interfaces.srv import ComputeTrajectory
@@ -143,4 +146,46 @@ def test_timeout_reported_and_parameters_answered_while_solving(client, ocp_node
     assert max(latencies) < 1.0, latencies
     assert ocp_node.alive
     # the node is still fine
+    assert client(GOOD).success
+
+
+def test_burst_of_50_requests_is_answered_in_full(client, spin_until):
+    """50 clients call at once: every one gets an answer (solved, or "busy" beyond max_pending);
+    the service queue holds the burst (the default depth of 10 lost most of it)."""
+    node = client.node
+    clients = [
+        node.create_client(ComputeTrajectory, "/ocp/compute_trajectory", qos_profile=SERVICE_QOS)
+        for _ in range(50)
+    ]
+    assert spin_until(lambda: all(c.service_is_ready() for c in clients), 60.0)
+    spin_until(lambda: False, 1.0)  # discovery settles both ways for every client
+    futures = [c.call_async(ocp_request(GOOD)) for c in clients]
+    assert spin_until(lambda: all(f.done() for f in futures), 120.0), sum(f.done() for f in futures)
+    answers = [f.result() for f in futures]
+    solved = sum(a.success for a in answers)
+    busy = sum("busy" in a.message for a in answers)
+    print(f"burst of 50: {solved} solved, {busy} busy")
+    assert solved >= 1 and solved + busy == 50, [a.message for a in answers]
+    for c in clients:
+        node.destroy_client(c)
+
+
+def test_parameters_checked_at_run_time_like_at_start_up(client, spin_until):
+    node = client.node
+    setp = node.create_client(SetParameters, "/pd_ocp_node/set_parameters")
+    assert spin_until(setp.service_is_ready, 10.0)
+
+    def set_(name: str, value) -> tuple[bool, str]:
+        msg = Parameter(name, value=value).to_parameter_msg()
+        fut = setp.call_async(SetParameters.Request(parameters=[msg]))
+        assert spin_until(fut.done, 10.0)
+        r = fut.result().results[0]
+        return r.successful, r.reason
+
+    ok, reason = set_("method", "bogus")  # the same words as at start-up
+    assert not ok and reason.startswith("parameter method: must be one of"), reason
+    assert not set_("control_points", -5)[0]
+    assert set_("timeout_s", 30)[0]  # an integer for a double
+    assert set_("timeout_s", 60.0)[0]
+    assert not set_("timeout_s", "soon")[0]
     assert client(GOOD).success

@@ -1,0 +1,59 @@
+"""Start-up parameters of the nodes: checked with the run-time check, one line when wrong,
+integers accepted for doubles (issue 9 items 10 and 11), an unknown controller refused."""
+
+from __future__ import annotations
+
+import pytest
+from helpers import ProcessSet, wait_for
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
+
+START_S = 60.0
+
+
+def _run_until_exit(tmp_path, package: str, params: dict) -> tuple[int, str]:
+    procs = ProcessSet(tmp_path)
+    try:
+        p = procs.node(package, params)
+        assert wait_for(lambda: not p.alive, START_S), f"{package} did not stop:\n{p.log()}"
+        return p.proc.returncode, p.log()
+    finally:
+        procs.stop_all()
+
+
+@pytest.mark.parametrize(
+    ("package", "params", "code", "says"),
+    [
+        ("pd_ocp_node", {"method": "bogus"}, 2, "parameter method: must be one of"),
+        ("pd_ocp_node", {"objective": "nope"}, 2, "parameter objective: must be one of"),
+        ("pd_ocp_node", {"control_points": -5}, 2, "parameter control_points: must be >= 2"),
+        ("pd_ocp_node", {"timeout_s": "soon"}, 2, "parameter timeout_s: expected a double"),
+        ("pd_sim_node", {"rate_hz": "abc"}, 2, "parameter rate_hz: expected a double"),
+        ("pd_sim_node", {"missing_command": "x"}, 2, "parameter missing_command: must be one of"),
+        ("pd_sim_node", {"lockstep": 3}, 2, "parameter lockstep: expected a bool"),
+        ("pd_policy_node", {"stats_period_s": -1}, 2, "parameter stats_period_s: must be >= 0"),
+        ("pd_policy_node", {"controller": "nope"}, 1, "controller 'nope': unknown controller"),
+    ],
+)
+def test_bad_start_up_parameter_is_one_line(tmp_path, package, params, code, says):
+    rc, log = _run_until_exit(tmp_path, package, params)
+    assert rc == code, log
+    lines = log.strip().splitlines()
+    assert len(lines) == 1 and says in lines[0] and package in lines[0], log
+    assert "Traceback" not in log
+
+
+def test_integers_accepted_for_doubles(tmp_path):
+    procs = ProcessSet(tmp_path)
+    try:
+        sim = procs.node("pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "autostart": False})
+        ocp = procs.node("pd_ocp_node", {"timeout_s": 30})
+        pol = procs.node("pd_policy_node", {"stats_period_s": 5, "controller": "zemzev"})
+        assert sim.wait_log("real time at 10 Hz", START_S), sim.log()
+        assert ocp.wait_log("timeout_s=30.0", START_S), ocp.log()
+        assert pol.wait_log("policy ready", START_S), pol.log()
+        for p in (sim, ocp, pol):
+            assert p.stop() == 0, p.log()
+            assert "Traceback" not in p.log() and "context is invalid" not in p.log(), p.log()
+    finally:
+        procs.stop_all()

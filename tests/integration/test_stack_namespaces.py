@@ -1,0 +1,96 @@
+"""Two real-time stacks on one ROS domain, in two namespaces, with the shipped policy (issue 9).
+
+- /vehicle1 starts its simulator and policy together (the launch file's order); a stray
+  publisher in /vehicle1 sends a conflicting command for every step right after the policy's:
+  the first command wins, every stray one is rejected and counted, and the lander lands;
+- /vehicle2 follows the README's `ros2 run` order: the simulator first, the policy seconds later.
+  The simulator waits for the first command before its clock starts, so nothing is missed at
+  start-up and it lands;
+- nothing crosses between the namespaces (each simulator counts only its own commands);
+- the policy node stops on SIGINT without "publisher's context is invalid".
+"""
+
+from __future__ import annotations
+
+import signal
+
+import pytest
+from helpers import ProcessSet
+from pd_ros_common.convert import vec3
+
+from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_ros_common import qos
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
+
+START_S = 60.0
+README_DELAY_S = 8.0  # the policy started this long after the simulator
+STRAY_ACTION = 0  # (-10, -10, 0) kN: no vertical thrust, the lander would fall if it were flown
+
+
+def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin_until):
+    procs = ProcessSet(tmp_path)
+    node = make_node("namespaces_probe")
+    results: dict[str, list[EpisodeResult]] = {"/vehicle1": [], "/vehicle2": []}
+    for ns, got in results.items():
+        node.create_subscription(EpisodeResult, f"{ns}/lander/episode", got.append, qos.EPISODE_QOS)
+    strays: list[ThrustCommand] = []
+    stray_pub = node.create_publisher(
+        ThrustCommand, "/vehicle1/lander/thrust_cmd", qos.LOOP_PUB_QOS
+    )
+
+    def answer_with_stray(cmd: ThrustCommand) -> None:
+        if cmd.action == STRAY_ACTION:
+            return  # (ours, or the policy's own choice: nothing to contradict)
+        stray = ThrustCommand(episode=cmd.episode, step=cmd.step, action=STRAY_ACTION)
+        stray.thrust = vec3([-10e3, -10e3, 0.0])
+        stray_pub.publish(stray)
+        strays.append(stray)
+
+    node.create_subscription(
+        ThrustCommand, "/vehicle1/lander/thrust_cmd", answer_with_stray, qos.LOOP_SUB_QOS
+    )
+    ns1, ns2 = {"__ns": "/vehicle1"}, {"__ns": "/vehicle2"}
+    try:
+        sim1 = procs.node("pd_sim_node", {"seed": 1}, ns1, name="sim1")
+        pol1 = procs.node("pd_policy_node", {}, ns1, name="policy1")
+        sim2 = procs.node("pd_sim_node", {"seed": 2}, ns2, name="sim2")
+        assert sim2.wait_log("episode 1 starts", START_S), procs.logs()
+        spin_until(lambda: False, README_DELAY_S)
+        pol2 = procs.node("pd_policy_node", {}, ns2, name="policy2")
+        assert spin_until(lambda: all(results.values()), 180.0), procs.logs()
+        r1, r2 = results["/vehicle1"][0], results["/vehicle2"][0]
+        assert r1.landed and r2.landed, (r1.reason, r2.reason)
+        assert "first command of episode 1" in sim2.log(), sim2.log()
+        # The simulator's clock started with the first answer: nothing missed at start-up,
+        # and at most a few late answers on a loaded machine.
+        assert r2.missed_commands <= r2.steps // 20, r2
+        assert r2.rejected_commands == 0, "vehicle1's stray commands reached vehicle2"
+        assert len(strays) > 50
+        assert r1.rejected_commands >= len(strays) * 0.9, (r1.rejected_commands, len(strays))
+        assert "(conflict)" in sim1.log() and "first command wins" in sim1.log()
+        assert all(p.alive for p in (sim1, pol1, sim2, pol2)), procs.logs()
+        assert pol2.stop(sig=signal.SIGINT) == 0
+        assert "decision time overall" in pol2.log()
+        assert "context is invalid" not in pol2.log(), pol2.log()
+    finally:
+        procs.stop_all()
+
+
+def test_states_published_under_the_namespace_only(tmp_path, make_node, spin_until):
+    """Relative names: `-r __ns:=/vehicle3` moves every topic; the root names stay silent."""
+    procs = ProcessSet(tmp_path)
+    node = make_node("ns_probe")
+    root: list[LanderState] = []
+    moved: list[LanderState] = []
+    node.create_subscription(LanderState, "/lander/state", root.append, qos.LOOP_SUB_QOS)
+    node.create_subscription(LanderState, "/vehicle3/lander/state", moved.append, qos.LOOP_SUB_QOS)
+    try:
+        procs.node("pd_sim_node", {"start_wait_s": 0.0}, {"__ns": "/vehicle3"})
+        assert spin_until(lambda: len(moved) >= 5, START_S), procs.logs()
+        assert not root
+        spin_until(lambda: False, 0.5)
+        names = {n for n, _ in node.get_service_names_and_types()}
+        assert "/vehicle3/sim/reset" in names and "/sim/reset" not in names
+    finally:
+        procs.stop_all()
