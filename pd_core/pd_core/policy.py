@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -138,20 +139,72 @@ def _relu(x: np.ndarray) -> np.ndarray:
     return np.maximum(x, 0.0)
 
 
-def load_policy(path: str | Path) -> Policy:
-    """Load `<name>.pt` + `<name>.json`; PolicyLoadError naming the file and what is wrong."""
-    import torch
+def _one_line(exc: BaseException, limit: int = 160) -> str:
+    """The first line of an exception's message (torch's run to many), shortened."""
+    text = str(exc).strip().splitlines()
+    first = text[0].strip() if text else ""
+    first = first if len(first) <= limit else first[: limit - 3] + "..."
+    return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
 
-    from pd_core.dqn.network import QNetwork
+
+def _load_weights(pt: Path) -> dict[str, Any]:
+    """The tensors of a .pt file (torch.load with weights_only=True: no code runs), or
+    PolicyLoadError in one line that says what the file is."""
+    import torch  # optional heavy dependency: only loading a policy needs it
+
+    try:
+        state = torch.load(pt, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt or hostile files
+        text = str(exc)
+        hostile = re.search(r"Unsupported global: GLOBAL (\S+)", text)
+        if hostile:
+            raise PolicyLoadError(
+                f"{pt}: refused: it holds Python objects ({hostile.group(1)}), not only tensors; "
+                "policy files are read as plain tensors, and nothing in this one was run"
+            ) from None
+        detail = re.search(r"WeightsUnpickler error:\s*(.+)", text)
+        why = detail.group(1).strip() if detail else _one_line(exc)
+        raise PolicyLoadError(
+            f"{pt}: cannot load weights: not a PyTorch tensor file ({why})"
+        ) from None
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise PolicyLoadError(f"{pt}: cannot load weights: not a dict of tensors")
+    return state
+
+
+def _weights_mismatch(state: dict[str, Any], want: dict[str, Any]) -> str | None:
+    """None if `state` has exactly the tensors of `want` with their shapes, else what differs."""
+    missing = sorted(set(want) - set(state))
+    extra = sorted(set(state) - set(want))
+    if missing or extra:
+        return f"tensors missing {missing[:3]}, unexpected {extra[:3]}"
+    for name, t in want.items():
+        if tuple(state[name].shape) != tuple(t.shape):
+            return (
+                f"{name} has shape {list(state[name].shape)} in the file, the network needs "
+                f"{list(t.shape)}"
+            )
+    return None
+
+
+def load_policy(path: str | Path) -> Policy:
+    """Load `<name>.pt` + `<name>.json`; PolicyLoadError naming the file and what is wrong
+    (one line; never advice to lower the safety of the load)."""
+    from pd_core.dqn.network import QNetwork  # imports torch: optional heavy dependency
 
     pt, js = paths_for(path)
     for f in (pt, js):
         if not f.is_file():
             raise PolicyLoadError(f"{f}: no such file (a policy is a .pt and a .json beside it)")
+    for f in (pt, js):
+        if f.stat().st_size == 0:
+            raise PolicyLoadError(f"{f}: empty file (0 bytes), not a policy file")
     try:
         meta = json.loads(js.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise PolicyLoadError(f"{js}: unreadable metadata: {exc}") from exc
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PolicyLoadError(f"{js}: unreadable metadata: {_one_line(exc)}") from exc
+    if not isinstance(meta, dict):
+        raise PolicyLoadError(f"{js}: unreadable metadata: not a JSON object")
     diffs = [
         f"{k}: file has {meta.get(k)!r}, code has {v!r}"
         for k, v in expected_metadata().items()
@@ -175,9 +228,9 @@ def load_policy(path: str | Path) -> Policy:
             f"{js}: network has {net.n_inputs} inputs / {net.n_actions} outputs, "
             f"need 7 / {n_actions}"
         )
-    try:
-        state = torch.load(pt, map_location="cpu", weights_only=True)
-        net.load_state_dict(state)
-    except Exception as exc:  # torch raises many types for corrupt or mismatched files
-        raise PolicyLoadError(f"{pt}: cannot load weights: {exc}") from exc
+    state = _load_weights(pt)
+    why = _weights_mismatch(state, net.state_dict())
+    if why is not None:
+        raise PolicyLoadError(f"{pt}: cannot load weights: {why} (network described in {js})")
+    net.load_state_dict(state)
     return Policy(net, meta)
