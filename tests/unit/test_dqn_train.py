@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
+from pd_core.dqn.actor import NetActor
 from pd_core.dqn.config import TrainConfig, preset
-from pd_core.dqn.train import NetActor, Trainer, train
+from pd_core.dqn.train import Trainer, train
 from pd_core.evaluate import rollout, summarise
 
 torch.set_num_threads(1)

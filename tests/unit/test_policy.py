@@ -9,8 +9,8 @@ import pytest
 import torch
 
 import pd_core
+from pd_core.dqn.actor import NetActor
 from pd_core.dqn.network import QNetwork
-from pd_core.dqn.train import NetActor
 from pd_core.env import sample_initial_state
 from pd_core.policy import PolicyLoadError, load_policy, save_policy
 

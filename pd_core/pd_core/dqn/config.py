@@ -84,6 +84,9 @@ class TrainConfig:
     """reference controller used for controller demonstrations"""
     pretrain_updates: int = 0
     """gradient updates on demonstrations only before interaction starts (DQfD pre-training)"""
+    dispersions: str = ""
+    """dispersions the training envs sample (domain randomisation): a scenario or campaign name
+    or a YAML file of pd_core.dispersions ("": nominal, the paper)"""
     fuel_weight: float = 1.0
     """multiplies beta (control effort) of the training reward; evaluation is unaffected"""
     eval_every_s: float = 60.0

@@ -187,6 +187,9 @@ def nstep_from_episodes(
 class NStepCollector:
     """Turns batched env steps into n-step transitions, per env, with truncation handled."""
 
+    STATE = ("obs", "act", "rew", "count")
+    """the arrays a checkpoint must keep to continue the open windows"""
+
     def __init__(self, num_envs: int, n: int, gamma: float, obs_dim: int = 7) -> None:
         self.n, self.gamma, self.num_envs = n, gamma, num_envs
         self.obs = np.zeros((num_envs, n, obs_dim), dtype=np.float32)
