@@ -92,9 +92,18 @@ def _warm_up() -> None:
 
 
 def _solver_pool() -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(
+    """A one-process spawn pool, its process started now with SIGINT blocked: the process
+    inherits the mask, so a Ctrl-C to the whole process group during its start-up (before
+    `_warm_up` ignores SIGINT) does not kill it with a traceback."""
+    pool = ProcessPoolExecutor(
         max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_warm_up
     )
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        pool.submit(math.sqrt, 1.0)  # spawns the process (in this thread)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    return pool
 
 
 # Extra wall time granted to a solver process beyond the solve's own time limit (transfer, a
@@ -112,7 +121,6 @@ class OcpNode(Node):
         self.max_pending = p["max_pending"]
         self._solve_lock = threading.Lock()  # one solve at a time: they are CPU-bound
         self._pool = _solver_pool()
-        self._pool.submit(math.sqrt, 1.0)  # start the solver process now
         self._count_lock = threading.Lock()
         self._pending = 0
         self.served = 0
