@@ -1,0 +1,103 @@
+"""pd_policy_node's `controller` parameter: a reference controller of pd_core flies the lander over
+ROS in lockstep, exactly as it flies offline (issue 10 item 5)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import ProcessSet
+from pd_ros_common.convert import final_state, reset_request, state_from_msg
+
+from pd_core.controllers import CONTROLLERS, make_controller
+from pd_core.env import PoweredDescentEnv
+from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_interfaces.srv import ResetEpisode
+from pd_ros_common import qos
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
+
+START_S = 60.0
+MPC_STEPS = 15  # an MPC teacher re-plans every step: fly this many, not a whole episode
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    procs = ProcessSet(tmp_path_factory.mktemp("controllers"))
+    try:
+        node = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        assert node.wait_log("simulator ready", START_S), procs.logs()
+        yield procs
+    finally:
+        procs.stop_all()
+
+
+class Loop:
+    def __init__(self, make_node, spin_until):
+        self.node = make_node("controller_probe")
+        self.spin_until = spin_until
+        self.states: list[LanderState] = []
+        self.commands: list[ThrustCommand] = []
+        self.results: list[EpisodeResult] = []
+        sub = self.node.create_subscription
+        sub(LanderState, "/lander/state", self.states.append, qos.LOOP_SUB_QOS)
+        sub(ThrustCommand, "/lander/thrust_cmd", self.commands.append, qos.LOOP_SUB_QOS)
+        sub(EpisodeResult, "/lander/episode", self.results.append, qos.EPISODE_QOS)
+        self.reset_cli = self.node.create_client(ResetEpisode, "/sim/reset")
+        assert spin_until(self.reset_cli.service_is_ready, 20.0)
+
+    def fly(self, procs: ProcessSet, controller: str, seed: int) -> tuple[int, object]:
+        """Start a policy node with `controller` (the only one) and an episode; (episode, node)."""
+        policy = procs.node("pd_policy_node", {"controller": controller}, name=controller)
+        assert policy.wait_log("policy ready", START_S), policy.log()
+        n = self.node
+        assert self.spin_until(
+            lambda: (
+                n.count_publishers("/lander/thrust_cmd") >= 1
+                and n.count_subscribers("/lander/state") >= 2
+            ),
+            30.0,
+        )
+        self.spin_until(lambda: False, 0.5)
+        future = self.reset_cli.call_async(reset_request(None, seed))
+        assert self.spin_until(future.done, 20.0) and future.result().success
+        return future.result().episode, policy
+
+
+def offline(controller: str, seed: int, steps: int | None = None) -> list[np.ndarray]:
+    ctl = make_controller(controller)
+    env = PoweredDescentEnv(disturbance=True)
+    _, info = env.reset(seed=seed)
+    states = [info["state"]]
+    while steps is None or len(states) <= steps:
+        _, _, term, trunc, info = env.step(ctl.act(info["state"]))
+        states.append(info["state"])
+        if term or trunc:
+            break
+    return states
+
+
+def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until):
+    loop = Loop(make_node, spin_until)
+    episode, policy = loop.fly(sim, "zemzev", seed=8)
+    assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
+    assert policy.stop() == 0, policy.log()
+    result = next(r for r in loop.results if r.episode == episode)
+    expected = offline("zemzev", 8)
+    assert result.landed, result.reason
+    assert result.steps == len(expected) - 1 and result.rejected_commands == 0
+    np.testing.assert_array_equal(final_state(result), expected[-1])
+
+
+@pytest.mark.skipif("mpc-fuel" not in CONTROLLERS, reason="pd_core.controllers has no mpc-fuel")
+def test_mpc_fuel_flies_over_ros(sim, make_node, spin_until):
+    loop = Loop(make_node, spin_until)
+    episode, policy = loop.fly(sim, "mpc-fuel", seed=9)
+
+    def flown() -> list[LanderState]:
+        return [s for s in loop.states if s.episode == episode and s.step <= MPC_STEPS]
+
+    assert spin_until(lambda: len(flown()) > MPC_STEPS, 180.0), len(flown())
+    assert policy.stop() == 0, policy.log()
+    expected = offline("mpc-fuel", 9, MPC_STEPS)
+    got = sorted(flown(), key=lambda s: s.step)
+    np.testing.assert_allclose([state_from_msg(s) for s in got], expected, rtol=0, atol=1e-9)
