@@ -13,7 +13,7 @@ import json
 import sys
 from dataclasses import fields
 
-from pd_core.dqn.config import PRESETS, TrainConfig, add_arguments, from_args
+from pd_core.dqn.config import PRESETS, TrainConfig, add_arguments, check_config, from_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,8 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    import torch
-
+    # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
     from pd_core.dqn.train import Trainer
 
     if args.resume:
@@ -42,15 +41,19 @@ def main(argv: list[str] | None = None) -> int:
         }
         try:
             trainer = Trainer.resume(args.resume, overrides)
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"pd-train: cannot resume from {args.resume}: {exc}", file=sys.stderr)
             return 2
     else:
         cfg = from_args(args)
+        try:
+            check_config(cfg)
+        except ValueError as exc:
+            print(f"pd-train: {exc}", file=sys.stderr)
+            return 2
         if args.print_config:
             print(json.dumps(cfg.to_dict(), indent=2))
             return 0
-        torch.set_num_threads(max(cfg.torch_threads, 1))
         try:
             trainer = Trainer(cfg)
         except (FileNotFoundError, ValueError) as exc:

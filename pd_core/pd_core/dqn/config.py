@@ -148,6 +148,45 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+_POSITIVE = ("episodes", "num_envs", "batch_agent", "gamma", "lr", "n_step", "buffer_size")
+_NON_NEGATIVE = (
+    "max_minutes",
+    "max_updates",
+    "learning_starts",
+    "lr_finetune",
+    "grad_clip",
+    "epsilon_final",
+    "epsilon_episodes",
+    "batch_demo",
+    "margin",
+    "controller_demo_episodes",
+    "pretrain_updates",
+    "eval_every_s",
+    "checkpoint_every_s",
+    "torch_threads",
+)
+
+
+def check_config(cfg: TrainConfig) -> None:
+    """ValueError naming the first field out of its range (before any work is done)."""
+    for name in _POSITIVE:
+        if not getattr(cfg, name) > 0:
+            raise ValueError(f"{name} must be > 0, got {getattr(cfg, name)!r}")
+    for name in _NON_NEGATIVE:
+        if not getattr(cfg, name) >= 0:
+            raise ValueError(f"{name} must be >= 0, got {getattr(cfg, name)!r}")
+    if not 0.0 < cfg.updates_per_step:
+        raise ValueError(f"updates_per_step must be > 0, got {cfg.updates_per_step!r}")
+    if not (0.0 <= cfg.epsilon0 <= 1.0 and cfg.epsilon_final <= 1.0):
+        raise ValueError(f"epsilon0 and epsilon_final must lie in [0, 1], got {cfg.epsilon0!r}")
+    if not cfg.gamma <= 1.0:
+        raise ValueError(f"gamma must be <= 1, got {cfg.gamma!r}")
+    if cfg.target_period < 1 or cfg.eval_episodes < 1:
+        raise ValueError("target_period and eval_episodes must be >= 1")
+    if not cfg.hidden or min(cfg.hidden) < 1:
+        raise ValueError(f"hidden must be positive layer widths, got {cfg.hidden!r}")
+
+
 def preset(name: str, **overrides: Any) -> TrainConfig:
     """TrainConfig of a preset with field overrides."""
     if name not in PRESETS:
@@ -214,4 +253,13 @@ def from_args(ns: argparse.Namespace) -> TrainConfig:
     return preset(ns.preset, **overrides)
 
 
-__all__ = ["PRESETS", "TrainConfig", "add_arguments", "field", "field_docs", "from_args", "preset"]
+__all__ = [
+    "PRESETS",
+    "TrainConfig",
+    "add_arguments",
+    "check_config",
+    "field",
+    "field_docs",
+    "from_args",
+    "preset",
+]

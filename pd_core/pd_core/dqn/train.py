@@ -30,7 +30,7 @@ from pd_core.dqn.checkpoint import (
     read_checkpoint,
     write_checkpoint,
 )
-from pd_core.dqn.config import TrainConfig
+from pd_core.dqn.config import TrainConfig, check_config
 from pd_core.dqn.demonstrations import build_demo_memory
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
 from pd_core.dqn.run_log import RunLogs, run_folder
@@ -91,6 +91,7 @@ class Trainer:
         on_eval: EvalCallback | None = None,
         restore: dict[str, Any] | None = None,
     ) -> None:
+        check_config(cfg)
         self.cfg = cfg
         self.quiet = quiet
         self.on_eval = on_eval

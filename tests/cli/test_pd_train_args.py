@@ -1,0 +1,31 @@
+"""pd-train refuses out-of-range flags with one line, before it builds or writes anything."""
+
+from __future__ import annotations
+
+import pytest
+
+from pd_core.cli import train as pd_train
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--episodes", "-3"], "episodes must be > 0"),
+        (["--num-envs", "0"], "num_envs must be > 0"),
+        (["--updates-per-step", "0"], "updates_per_step must be > 0"),
+        (["--epsilon0", "1.5"], "epsilon0"),
+        (["--max-minutes", "-1"], "max_minutes must be >= 0"),
+    ],
+)
+def test_bad_flag_is_one_line_and_writes_no_run(tmp_path, capsys, flags, named):
+    run = tmp_path / "run"
+    assert pd_train.main([*flags, "--run-dir", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and named in err[0], err
+    assert not run.exists()
+
+
+def test_resume_from_nowhere_is_one_line(tmp_path, capsys):
+    assert pd_train.main(["--resume", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no checkpoint" in err[0], err
