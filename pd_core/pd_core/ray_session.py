@@ -28,8 +28,11 @@ def connect(address: str | None = None, num_cpus: int | None = None) -> Any:
     if ray.is_initialized():
         return ray
     quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
+    local = not address or address == "local"
     try:
-        if not address or address == "local":
+        if local:
+            # Ray gives its raylet a fixed 30 s to register; a machine loaded far beyond its
+            # cores can miss that (then this fails, and retrying would leak Ray's processes).
             ray.init(
                 num_cpus=num_cpus or os.cpu_count() or 1,
                 include_dashboard=False,
@@ -43,7 +46,8 @@ def connect(address: str | None = None, num_cpus: int | None = None) -> Any:
         raise
     except Exception as exc:  # noqa: BLE001 - ray raises many types; the user needs one line
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RayUnavailable(f"cannot join the Ray cluster at {address!r}: {first}{_HINT}") from exc
+        where = "cannot start a local Ray instance" if local else f"cannot join {address}"
+        raise RayUnavailable(f"{where}: {first}{_HINT}") from exc
     return ray
 
 
