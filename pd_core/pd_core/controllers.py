@@ -8,16 +8,21 @@ that braking profile. The commanded thrust T = m (a - g) is rounded to the neare
 7 x 7 x 3 levels. It is Markov (a function of the state only), so a Q-network can imitate it, and
 it flies the disturbed env, so its transitions are on-distribution demonstrations.
 `pd-eval --controller zemzev` evaluates it like a trained policy.
+
+`mpc-fuel` and `mpc-energy` are the receding-horizon optimal-control teacher (`pd_core.mpc`) with
+the fuel or the energy (Eq. 4) objective, and ZEM/ZEV as its fallback near the pad.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.config import GRAVITY_MPS2
+from pd_core.mpc import MPCController, mpc_controller
 from pd_core.state import check_state
 
 
@@ -83,10 +88,21 @@ class ZemZevController:
         return self.actions.thrust(int(action))
 
 
-CONTROLLERS = {"zemzev": ZemZevController}
+def _mpc(objective: str) -> Callable[[], MPCController]:
+    return lambda: mpc_controller(objective, fallback=ZemZevController())
 
 
-def make_controller(name: str) -> ZemZevController:
-    if name not in CONTROLLERS:
-        raise ValueError(f"unknown controller {name!r}; choose from {sorted(CONTROLLERS)}")
-    return CONTROLLERS[name]()
+# name -> factory: `pd-eval --controller NAME`, `controller:NAME` specs and the policy node
+FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
+    "zemzev": ZemZevController,
+    "mpc-fuel": _mpc("fuel"),
+    "mpc-energy": _mpc("energy"),
+}
+CONTROLLERS = tuple(FACTORIES)
+
+
+def make_controller(name: str) -> ZemZevController | MPCController:
+    """A fresh controller by name (MPC controllers keep plans: one per campaign or episode)."""
+    if name not in FACTORIES:
+        raise ValueError(f"unknown controller {name!r}; choose from {', '.join(CONTROLLERS)}")
+    return FACTORIES[name]()

@@ -40,18 +40,22 @@ SLP_MAX_ITER = 60
 
 
 def solve_lp(
-    cost: np.ndarray, a_eq: np.ndarray, b_eq: np.ndarray, lb: np.ndarray, ub: np.ndarray
+    cost: np.ndarray,
+    a_eq: np.ndarray,
+    b_eq: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+    highs: highspy.Highs | None = None,
 ) -> np.ndarray | None:
     """argmin cost @ x s.t. a_eq x = b_eq, lb <= x <= ub (dense a_eq with few rows), or None.
+    `highs`: a solver object to re-use (its model is replaced; building one costs ~0.3 ms).
 
     HiGHS through `highspy` directly: the same solver as scipy's linprog(method="highs") without
     its per-call validation and presolve, 3-10x faster on these 100-500 column LPs
     (bench/mpc_speed.py).
     """
     rows, cols = a_eq.shape
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("presolve", "off")  # 6 dense rows: presolve costs 5x the solve
+    h = new_highs() if highs is None else highs
     lp = highspy.HighsLp()
     lp.num_col_, lp.num_row_ = cols, rows
     lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
@@ -67,34 +71,52 @@ def solve_lp(
     return np.asarray(h.getSolution().col_value)
 
 
+def new_highs() -> highspy.Highs:
+    """A quiet HiGHS without presolve (6 dense rows: presolve costs 5x the solve)."""
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("presolve", "off")
+    return h
+
+
 def fuel_weights(g: Grid) -> np.ndarray:
     """w_k = sum_i dt_i W_ik / (Isp g0) (kg per N of control point k): the fuel of a schedule
     whose adjacent control points share a sign (an upper bound on it otherwise)."""
     return g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
 
 
-def fuel_lp_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
-    """(fuel kg, nan, p) at fixed t_f: LP passes from `st` (updated in place) subject to the
-    linearised terminal constraints."""
+def fuel_lp_plan(
+    pb: Problem, g: Grid, p: np.ndarray, passes: int, highs: highspy.Highs | None = None
+) -> np.ndarray | None:
+    """Control points (N, 3) N after up to `passes` LP passes from p at the fixed t_f of grid g,
+    min sum_k w_k (p+ + p-) subject to the linearised terminal constraints; None if an LP is
+    infeasible. The receding-horizon teacher calls this with passes=1 and its own `highs`."""
     n = pb.n_control
-    g = pb.grid(t_f)
     c = np.tile(fuel_weights(g), 6)  # [p+ axis 0, p- axis 0, p+ axis 1, ...]
     hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
     ub = np.repeat(hi_pm.reshape(-1), n)
     lb = np.zeros(6 * n)
-    p = st.p
     for _ in range(passes):
         jac, rhs, _ = pb.linearised(p, g)
         a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n)
-        x = solve_lp(c, a_eq, rhs, lb, ub)
+        x = solve_lp(c, a_eq, rhs, lb, ub, highs)
         if x is None:
-            return INFEASIBLE
+            return None
         xs = x.reshape(3, 2, n)
         p_new = (xs[:, 0] - xs[:, 1]).T * KN
         change = np.abs(p_new - p).max()
         p = p_new
         if change < 1e-1:
             break
+    return p
+
+
+def fuel_lp_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
+    """(fuel kg, nan, p) at fixed t_f: `fuel_lp_plan` from `st` (updated in place)."""
+    g = pb.grid(t_f)
+    p = fuel_lp_plan(pb, g, st.p, passes)
+    if p is None:
+        return INFEASIBLE
     st.p = p
     st.evals += 1
     return pb.fly(p, g).fuel, math.nan, p

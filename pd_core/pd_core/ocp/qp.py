@@ -22,7 +22,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 
 from pd_core.ocp.guess import initial_guess
-from pd_core.ocp.model import KN, TF_MAX_S, TF_MIN_S, Problem, SolverOutput, SolveTimeout
+from pd_core.ocp.model import KN, TF_MAX_S, TF_MIN_S, Grid, Problem, SolverOutput, SolveTimeout
 
 # A t_f evaluation: (J*, dJ*/dt_f or nan, control points or None when infeasible)
 TfEval = tuple[float, float, "np.ndarray | None"]
@@ -127,11 +127,12 @@ def pdas_qp(
     return p, lam, act, False
 
 
-def energy_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
-    """(J* kN^2 s, dJ*/dt_f, p) at fixed t_f: SQP passes of the PDAS QP from `st` (updated in
-    place); the derivative comes from the envelope theorem, dJ*/dt_f = dJ/dt_f + lambda .
-    dc/dt_f at the optimum."""
-    g = pb.grid(t_f)
+def energy_qp_plan(
+    pb: Problem, g: Grid, st: WarmStart, passes: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(control points (N, 3) N, terminal multipliers (6,)) after up to `passes` SQP passes of
+    the PDAS QP from `st` (its active set updated in place) at the fixed t_f of grid g; None if
+    a QP fails. The receding-horizon teacher calls this with passes=1."""
     q_main, q_upper = g.hessian_diagonals()
     p, active = st.p, st.active
     lo, hi = pb.limits.lo / KN, pb.limits.hi / KN
@@ -140,13 +141,26 @@ def energy_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
         jac, rhs, _ = pb.linearised(p, g)
         pk, lam, active, ok = pdas_qp(q_main, q_upper, jac, rhs, lo, hi, active)
         if not ok:
-            return INFEASIBLE
+            return None
         p_new = pk.T * KN
         change = np.abs(p_new - p).max()
         p = p_new
         if change < 1e-2:
             break
-    st.p, st.active = p, active
+    st.active = active
+    return p, lam
+
+
+def energy_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:
+    """(J* kN^2 s, dJ*/dt_f, p) at fixed t_f: `energy_qp_plan` from `st` (updated in place);
+    the derivative comes from the envelope theorem, dJ*/dt_f = dJ/dt_f + lambda . dc/dt_f at
+    the optimum."""
+    g = pb.grid(t_f)
+    out = energy_qp_plan(pb, g, st, passes)
+    if out is None:
+        return INFEASIBLE
+    p, lam = out
+    st.p = p
     st.evals += 1
     gr = pb.gradients(p, g)
     return gr.j / KN**2, gr.dj_dtf / KN**2 + float(lam @ gr.dc_dtf), p

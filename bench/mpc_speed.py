@@ -1,0 +1,157 @@
+"""Receding-horizon teacher (pd_core.mpc): per-step re-plan time beside a cold free-final-time
+solve, and closed-loop success and fuel beside ZEM/ZEV, in one run.
+
+Part 1 flies `--episodes` nominal Table 3 episodes (disturbances on, seed `--seed`) with mpc-fuel,
+mpc-energy and zemzev, and prints per controller: success, median fuel, fuel / fuel-optimal
+(`pd_core.ocp.solve(objective="fuel")` with the RL limits from each initial state, the first
+`--fuel-subset` episodes), the warm re-plan time (median, p99) and the cold solve of each
+episode's first state (median), as wall clock and as CPU time of the solving thread. On a
+machine other processes load, wall clock includes waiting for a core; CPU time does not.
+
+Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="highs") against
+highspy directly (no presolve), on the same LPs.
+
+Single-threaded BLAS (set below before numpy loads), as bench/ocp_speed.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from typing import Any
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+from scipy.optimize import linprog  # noqa: E402
+
+from pd_core import ocp  # noqa: E402
+from pd_core.config import RL_THRUST  # noqa: E402
+from pd_core.controllers import ZemZevController, make_controller  # noqa: E402
+from pd_core.evaluate import rollout  # noqa: E402
+from pd_core.mpc import MPCController, MPCParams  # noqa: E402
+from pd_core.ocp.fuel import fuel_weights, new_highs, solve_lp  # noqa: E402
+from pd_core.ocp.model import KN  # noqa: E402
+
+
+def _ms(v: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(v) * 1e3, q)) if v else float("nan")
+
+
+def controller(name: str) -> Any:
+    """A registered controller, or `mpc-<objective>-nearest`: the teacher rounding to the
+    nearest level instead of Eq. 5 (not the paper's; for comparison)."""
+    if name.endswith("-nearest"):
+        objective = name.split("-")[1]
+        return MPCController(MPCParams(objective=objective, rounding="nearest"), ZemZevController())
+    return make_controller(name)
+
+
+def fly(name: str, episodes: int, seed: int, fuel_opt: np.ndarray) -> dict[str, float]:
+    ctl = controller(name)
+    t0 = time.perf_counter()
+    ro = rollout(ctl, episodes, seed)
+    wall = time.perf_counter() - t0
+    k = len(fuel_opt)
+    out = {
+        "success": float(np.mean(ro.landed)),
+        "fuel": float(np.median(ro.fuel_kg)),
+        "ratio": float(np.median(ro.fuel_kg[:k] / fuel_opt)) if k else float("nan"),
+        "wall_s": wall,
+        "steps": int(ro.steps.sum()),
+    }
+    if isinstance(ctl, MPCController):
+        st = ctl.stats
+        out |= {
+            "warm_med": _ms(st.warm, 50),
+            "warm_p99": _ms(st.warm, 99),
+            "warm_cpu_med": _ms(st.warm_cpu, 50),
+            "warm_cpu_p99": _ms(st.warm_cpu, 99),
+            "cold_med": _ms(st.cold, 50),
+            "cold_cpu_med": _ms(st.cold_cpu, 50),
+            "fallback_pct": 100.0 * st.fallback_steps / max(out["steps"], 1),
+        }
+    return out
+
+
+def fuel_optimal(episodes: int, seed: int, subset: int) -> tuple[np.ndarray, list[float]]:
+    """Fuel-optimal fuel (kg) from the first `subset` initial states, and each solve's time."""
+    init = rollout(make_controller("zemzev"), min(subset, episodes), seed).initial_states
+    fuel, times = [], []
+    for s in init:
+        r = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=RL_THRUST)
+        fuel.append(r.fuel)
+        times.append(r.solve_time)
+    return np.array(fuel), times
+
+
+def lp_compare(n_control: int = 40, repeats: int = 30) -> tuple[float, float]:
+    """Median ms of one warm-re-plan fuel LP: scipy linprog vs highspy (no presolve)."""
+    s = np.array([800.0, -400.0, 1200.0, -30.0, 10.0, -60.0, 1900.0])
+    r = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=RL_THRUST, n_control=n_control)
+    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", n_control, RL_THRUST)
+    g = pb.grid(r.time_of_flight)
+    jac, rhs, _ = pb.linearised(r.thrust, g)
+    c = np.tile(fuel_weights(g), 6)
+    a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n_control)
+    hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
+    ub = np.repeat(hi_pm.reshape(-1), n_control)
+    lb = np.zeros_like(ub)
+    h = new_highs()
+    t_scipy, t_hs = [], []
+    for _ in range(repeats):
+        t0 = time.thread_time()
+        linprog(c, A_eq=a_eq, b_eq=rhs, bounds=np.stack([lb, ub], 1), method="highs")
+        t_scipy.append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        solve_lp(c, a_eq, rhs, lb, ub, h)
+        t_hs.append(time.thread_time() - t0)
+    return _ms(t_scipy, 50), _ms(t_hs, 50)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--episodes", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--fuel-subset", type=int, default=50, help="fuel-optimal solves (slow)")
+    ap.add_argument(
+        "--controllers",
+        nargs="+",
+        default=["mpc-fuel", "mpc-energy", "zemzev"],
+        help="registered names, or mpc-fuel-nearest / mpc-energy-nearest",
+    )
+    ap.add_argument("--lp", action="store_true", help="also compare scipy linprog and highspy")
+    args = ap.parse_args(argv)
+    fuel_opt, opt_times = fuel_optimal(args.episodes, args.seed, args.fuel_subset)
+    cold_ms = _ms(opt_times, 50)
+    print(
+        f"{args.episodes} nominal Table 3 episodes (disturbances on, seed {args.seed}); fuel "
+        f"ratio over the first {len(fuel_opt)}; cold fuel-optimal solve (80 points, "
+        f"free t_f) median {cold_ms:.1f} ms wall"
+    )
+    head = (
+        f"{'controller':<11}{'success':>8}{'fuel kg':>9}{'/opt':>7}{'warm ms med/p99':>17}"
+        f"{'cpu ms med/p99':>16}{'cold ms':>9}{'cold/warm':>10}{'fallback%':>10}{'wall s':>8}"
+    )
+    print(head)
+    for name in args.controllers:
+        r = fly(name, args.episodes, args.seed, fuel_opt)
+        row = f"{name:<11}{100 * r['success']:>7.1f}%{r['fuel']:>9.1f}{r['ratio']:>7.3f}"
+        if "warm_med" in r:
+            row += (
+                f"{r['warm_med']:>9.2f}/{r['warm_p99']:<7.1f}"
+                f"{r['warm_cpu_med']:>8.2f}/{r['warm_cpu_p99']:<7.1f}{r['cold_med']:>9.1f}"
+                f"{r['cold_med'] / r['warm_med']:>9.0f}x{r['fallback_pct']:>10.1f}"
+            )
+        else:
+            row += f"{'-':>17}{'-':>16}{'-':>9}{'-':>10}{'-':>10}"  # a law, no solves
+        print(row + f"{r['wall_s']:>8.1f}", flush=True)
+    if args.lp:
+        sp, hs = lp_compare()
+        print(f"fuel LP of a re-plan (40 points, CPU ms): scipy linprog {sp:.2f}, highspy {hs:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,306 @@
+"""Receding-horizon optimal-control teacher (closed loop): re-plan the OCP at every step.
+
+Issue 10's closed-loop teacher (ours; the paper's demonstrations are open loop, Sec. 2.2). Each
+control period it solves Eq. 4 (objective "energy") or the fuel problem from the current state,
+flies the plan's first step quantised to one of the 147 actions, and re-plans at the next state.
+
+* **Warm start, known time-to-go.** The first state of an episode gets a cold free-final-time
+  solve (`pd_core.ocp.solve_problem`). After that, the time-to-go shrinks by dt each step and the
+  re-plan is a fixed-t_f solve warm-started from the previous plan shifted by one step: one SQP
+  pass of the tridiagonal QP (energy, `ocp.qp.energy_at`) or one LP pass (fuel,
+  `ocp.fuel.fuel_lp_at`, HiGHS), a few milliseconds instead of a t_f search.
+* **Plan size and margin.** Control points every `control_spacing_s` of the time-to-go
+  (between `min_control_points` and `max_control_points`): the plan shrinks with the horizon.
+  Plans use `plan_thrust_fraction` (90 %) of the RL limits, leaving authority for the
+  quantisation and the disturbance (a fuel-optimal plan brakes at its limit to the end).
+* **Low gate.** Plans end at rest `gate_altitude_m` (2 m) above the pad, not on it: rest exactly
+  on the pad at t_f -> 0 asks for infinite precision and leaves no room to correct.
+* **Action (Eq. 5).** a* is the plan's first-step thrust normalised over the RL limits, and the
+  level above or below it is chosen by the sign of the velocity error dv = v*_{t+1} - v_t
+  against the plan's next state (`pd_core.discretise.eq5_levels`, the rounding of the
+  demonstrations). `rounding="nearest"` (not the paper's) is measured beside it in
+  bench/mpc_speed.py.
+* **Fallback (documented safe law).** The fallback controller (the ZEM/ZEV law, whose final
+  descent at 0.8 m/s + 0.3 z lands every Table 3 case) flies the rest of the episode once the
+  lander is within `terminal_altitude_m` of the gate or `terminal_time_s` of the plan's end, and
+  whenever the OCP has no solution: a failed cold solve, or a warm re-plan infeasible at the
+  time-to-go and at `extra_time_s` more (a state that drifted from a plan at its limit). So the
+  teacher never fails for want of a plan, and never pays a cold solve mid-flight.
+
+Plans are matched to states, not to row numbers: `pd_core.evaluate.rollout` passes only the
+landers still flying, so rows shift as episodes end. Each plan remembers the state it predicts
+next (the commanded action, no disturbance); an incoming state continues the plan whose
+prediction is nearest within `continuity_*` (normalised, greedy), and a state that continues no
+plan starts a new episode (a cold solve). Without navigation noise a true continuation is
+within millimetres of its prediction and other episodes are metres or kilograms away, so the
+matching, and hence every action, depends only on the episode's own history.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from pd_core import ocp
+from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
+from pd_core.config import DT_S, ThrustLimits
+from pd_core.discretise import eq5_levels
+from pd_core.dynamics import step_scalar
+from pd_core.ocp.fuel import fuel_lp_plan, new_highs
+from pd_core.ocp.qp import WarmStart, energy_qp_plan
+from pd_core.state import check_state
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
+class Actor(Protocol):
+    def act_batch(self, states: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class MPCParams:
+    """Settings of the receding-horizon teacher (ours; chosen on Table 1/3, see bench/mpc_speed)."""
+
+    objective: str = "fuel"  # "energy" (Eq. 4) or "fuel"
+    control_spacing_s: float = 1.0  # plan control points per second of time-to-go
+    min_control_points: int = 4
+    max_control_points: int = 40
+    passes: int = 1  # SQP (energy) or LP (fuel) passes per warm re-plan
+    # plans use this fraction of the RL thrust limits: the rest is authority to correct the
+    # quantisation and the disturbance (a fuel-optimal plan brakes at its limit to the end)
+    plan_thrust_fraction: float = 0.9
+    # plans end at rest this high above the pad (a "low gate"): rest exactly on the pad at t_f
+    # asks for infinite precision at t_f -> 0, and a plan that brakes at its limit to the
+    # ground leaves nothing for the quantisation and the disturbance
+    gate_altitude_m: float = 2.0
+    terminal_time_s: float = 1.0  # below this time-to-go the fallback law lands
+    terminal_altitude_m: float = 0.5  # ... or below this height above the gate
+    # "eq5": Eq. 5 against the plan's next state (the demonstrations' rounding); "nearest":
+    # the nearest level (not the paper's; measured beside it in bench/mpc_speed.py)
+    rounding: str = "eq5"
+    extra_time_s: tuple[float, ...] = (0.0, 1.0, 3.0)  # warm re-plans tried, in order
+    # a state continues a plan when it is within these of the plan's prediction (navigation
+    # noise of the `nav-noise` dispersion: 1 m, 10 kg; disturbance: millimetres)
+    continuity_m: float = 5.0
+    continuity_mps: float = 2.0
+    continuity_kg: float = 50.0
+
+
+@dataclass
+class _Row:
+    """One episode's plan: control points over the time-to-go from the last state."""
+
+    p: np.ndarray | None = None  # (n, 3) N; None: no plan (fallback)
+    t_go: float = 0.0  # s, from the state the plan was made for
+    active: np.ndarray | None = None  # warm active set of the energy QP
+    predicted: np.ndarray | None = None  # (7,) state expected next (commanded action, no wind)
+    terminal: bool = False  # near the pad or no plan: the fallback flies the rest
+
+
+@dataclass
+class ReplanStats:
+    """Time of every re-plan (s), by kind, wall clock and this thread's CPU time (the figure
+    that holds on a machine other processes load), for bench/mpc_speed.py."""
+
+    warm: list[float] = field(default_factory=list)
+    cold: list[float] = field(default_factory=list)
+    warm_cpu: list[float] = field(default_factory=list)
+    cold_cpu: list[float] = field(default_factory=list)
+    fallback_steps: int = 0
+
+
+class MPCController:
+    """Closed-loop teacher with the interface of `ZemZevController`: act, act_batch, thrust."""
+
+    def __init__(
+        self,
+        params: MPCParams | None = None,
+        fallback: Actor | None = None,
+        actions: ActionSpace = DEFAULT_ACTIONS,
+    ) -> None:
+        self.params = params or MPCParams()
+        if fallback is None:
+            raise ValueError("MPCController needs a fallback controller (e.g. ZemZevController)")
+        self.fallback = fallback
+        self.actions = actions
+        self.name = f"mpc-{self.params.objective}"
+        self._lo, self._hi = actions.limits.lo, actions.limits.hi
+        self._n = np.asarray(actions.n_per_axis)
+        # the problem built once; `at` re-uses it from each state (checks included)
+        origin = np.array([0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0])
+        f = self.params.plan_thrust_fraction
+        limits = ThrustLimits(
+            tuple(f * actions.limits.lo),
+            tuple(f * actions.limits.hi),  # type: ignore[arg-type]
+        )
+        self._problem = ocp.Problem(
+            origin[0:3], origin[3:6], origin[6], self.params.objective, 2, limits
+        )
+        self._rows: list[_Row] = []
+        self._highs = new_highs()  # re-used by every fuel LP of this controller
+        self.stats = ReplanStats()
+
+    def reset(self) -> None:
+        """Forget every plan (the next call starts cold)."""
+        self._rows = []
+
+    def thrust(self, action: int) -> np.ndarray:
+        return self.actions.thrust(int(action))
+
+    def act(self, state: np.ndarray) -> int:
+        return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        """Actions (B,) for physical states (B, 7), each continuing the plan it matches."""
+        s = check_state(states).reshape(-1, 7)
+        rows = self._match(s)
+        out = np.empty(len(s), dtype=np.int64)
+        for i, row in enumerate(rows):
+            out[i] = self._act_row(row, s[i])
+        self._rows = rows  # plans no state continued belong to finished episodes
+        return out
+
+    def _match(self, s: np.ndarray) -> list[_Row]:
+        """The plan each state continues (greedy, nearest normalised prediction first) or a
+        new one."""
+        rows = [_Row() for _ in range(len(s))]
+        old = [r for r in self._rows if r.predicted is not None]
+        if not old:
+            return rows
+        p = self.params
+        pred = np.stack([r.predicted for r in old])  # type: ignore[misc]
+        d = np.abs(s[:, None, :] - pred[None, :, :])
+        dist = np.maximum(
+            np.maximum(
+                d[..., 0:3].max(-1) / p.continuity_m, d[..., 3:6].max(-1) / p.continuity_mps
+            ),
+            d[..., 6] / p.continuity_kg,
+        )
+        taken = np.zeros(len(old), dtype=bool)
+        for flat in np.argsort(dist, axis=None):
+            i, j = divmod(int(flat), len(old))
+            if dist[i, j] >= 1.0:
+                break
+            if rows[i].predicted is None and not taken[j]:
+                rows[i], taken[j] = old[j], True
+        return rows
+
+    def first_action(self, state: np.ndarray) -> int:
+        """Eq. 5 action of a cold free-final-time plan from `state` (fallback if none), without
+        touching the plans of `act_batch`."""
+        return self._act_row(_Row(), check_state(state).reshape(7))
+
+    # --- one row ---------------------------------------------------------------------------
+
+    def _act_row(self, row: _Row, s: np.ndarray) -> int:
+        planned = self._plan(row, s)
+        if planned is None:
+            self.stats.fallback_steps += 1
+            row.p = None
+            action = int(self.fallback.act_batch(s.reshape(1, 7))[0])
+        else:
+            action = self._eq5_action(s, planned)
+        row.predicted = np.array(step_scalar(tuple(s), tuple(self.thrust(action)), _ZERO, DT_S))
+        return action
+
+    def _to_gate(self, s: np.ndarray) -> np.ndarray:
+        """The state relative to the gate the plans aim at (rest, gate_altitude_m up)."""
+        g = s.copy()
+        g[2] -= self.params.gate_altitude_m
+        return g
+
+    def _n_control(self, t_go: float) -> int:
+        p = self.params
+        n = math.ceil(t_go / p.control_spacing_s) + 1
+        return int(min(max(n, p.min_control_points), p.max_control_points))
+
+    def _plan(self, row: _Row, s: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """(control points (n, 3) N, t_go s) from s, or None: the fallback flies this step."""
+        p = self.params
+        near_end = row.p is not None and row.t_go - DT_S < p.terminal_time_s
+        row.terminal |= bool(s[2] - p.gate_altitude_m < p.terminal_altitude_m) or near_end
+        if row.terminal:
+            return None
+        t0, c0 = time.perf_counter(), time.thread_time()
+        if row.p is None:  # a new episode
+            plan = self._cold(row, s)
+            self.stats.cold.append(time.perf_counter() - t0)
+            self.stats.cold_cpu.append(time.thread_time() - c0)
+        else:
+            # the known time-to-go first; if the state has drifted too far for it (a plan at
+            # its thrust limit), a little more time
+            plan = None
+            for extra_s in p.extra_time_s:
+                plan = self._warm(row, s, row.t_go - DT_S + extra_s)
+                if plan is not None:
+                    break
+            self.stats.warm.append(time.perf_counter() - t0)
+            self.stats.warm_cpu.append(time.thread_time() - c0)
+        row.terminal = plan is None  # no plan: the fallback lands the rest of the episode
+        return plan
+
+    def _warm(self, row: _Row, s: np.ndarray, t_go: float) -> tuple[np.ndarray, float] | None:
+        """Fixed-t_f re-plan from the previous plan shifted by one step."""
+        assert row.p is not None
+        n = self._n_control(t_go)
+        pb = self._problem.at(self._to_gate(s), n_control=n)
+        old_t = np.linspace(0.0, row.t_go, len(row.p))
+        new_t = np.linspace(0.0, t_go, n) + DT_S
+        warm = np.column_stack([np.interp(new_t, old_t, row.p[:, a]) for a in range(3)])
+        st = WarmStart(warm, row.active if n == len(row.p) else None)
+        g = pb.grid(t_go)
+        if self.params.objective == "energy":
+            out = energy_qp_plan(pb, g, st, self.params.passes)
+            plan = None if out is None else out[0]
+        else:
+            plan = fuel_lp_plan(pb, g, warm, self.params.passes, self._highs)
+        if plan is None:
+            return None
+        row.p, row.t_go, row.active = plan, t_go, st.active
+        return plan, t_go
+
+    def _cold(self, row: _Row, s: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """Free-final-time plan from s (the episode's first state, or after a failure)."""
+        n0 = self.params.max_control_points
+        try:
+            pb = self._problem.at(self._to_gate(s), n_control=n0)
+        except ValueError:
+            return None
+        res = ocp.solve_problem(pb)
+        if not res.success:
+            return None
+        if res.time_of_flight < self.params.terminal_time_s:
+            return None  # close enough to the pad for the fallback
+        n = self._n_control(res.time_of_flight)
+        p = res.thrust
+        if n != n0:  # resample the plan to the size warm re-plans will use
+            old_t = np.linspace(0.0, res.time_of_flight, n0)
+            new_t = np.linspace(0.0, res.time_of_flight, n)
+            p = np.column_stack([np.interp(new_t, old_t, p[:, a]) for a in range(3)])
+        row.p, row.t_go, row.active = p, res.time_of_flight, None
+        return p, res.time_of_flight
+
+    def _eq5_action(self, s: np.ndarray, plan: tuple[np.ndarray, float]) -> int:
+        """Eq. 5: a* of the plan's first step, rounded by the sign of v*_{t+1} - v_t."""
+        p, t_go = plan
+        # thrust of the first step: the plan interpolated at the step's midpoint (as `Grid`)
+        t_ctrl = np.linspace(0.0, t_go, len(p))
+        u0 = np.array([np.interp(0.5 * DT_S, t_ctrl, p[:, a]) for a in range(3)])
+        v_next = np.array(step_scalar(tuple(s), tuple(u0), _ZERO, DT_S)[3:6])
+        a_star = np.clip((u0 - self._lo) / (self._hi - self._lo), 0.0, 1.0)
+        if self.params.rounding == "nearest":
+            levels = np.rint(a_star * (self._n - 1)).astype(np.int64)
+        else:
+            levels = eq5_levels(a_star, v_next - s[3:6], self._n)
+        return int(self.actions.levels_to_action(levels[None])[0])
+
+
+def mpc_controller(objective: str, fallback: Actor) -> MPCController:
+    """The teacher with its default settings and the RL action set (Sec. 4.1)."""
+    if objective not in ocp.OBJECTIVES:
+        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
+    return MPCController(MPCParams(objective=objective), fallback, DEFAULT_ACTIONS)

@@ -1,0 +1,162 @@
+"""Demonstrations from the closed-loop optimal-control teacher (issue 10): episodes and labels.
+
+* `mpc_demonstrations`: episodes flown by the receding-horizon teacher (`pd_core.mpc`) in the
+  disturbed environment (and any dispersions), as 1-step transitions in the format of
+  `pd_core.dqn.train.controller_demos`.
+* `dagger_labels`: the OCP's discretised first action from each given state (DAgger-style expert
+  labels on states the agent itself visits).
+
+Both spread seeded chunks of fixed size over a process pool: chunk k always holds the same
+episodes (seeds seed + k * chunk ...) flown by a fresh teacher, so the result does not depend on
+the number of workers. Workers are spawned, not forked (the caller may hold torch threads).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from pd_core import discretise as disc
+from pd_core import ocp
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.config import RL_THRUST
+from pd_core.controllers import ZemZevController, make_controller
+from pd_core.evaluate import rollout
+
+DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balance 2 workers)
+LABEL_CHUNK_STATES = 20
+
+
+def _map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None) -> list[Any]:
+    """fn(*task) for every task, in order; in a spawned process pool unless workers <= 1."""
+    n = (os.cpu_count() or 1) if workers is None else workers
+    if n <= 1 or len(tasks) <= 1:
+        return [fn(*t) for t in tasks]
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(n, len(tasks)), mp_context=ctx) as pool:
+        return list(pool.map(fn, *zip(*tasks, strict=True)))
+
+
+def _fly_chunk(
+    objective: str,
+    n: int,
+    seed: int,
+    first_episode: int,
+    dispersions: Any,
+    initial_states: np.ndarray | None,
+) -> dict[str, np.ndarray]:
+    """Transitions of episodes first_episode .. + n - 1 (env seeds seed ..) of a fresh teacher."""
+    ro = rollout(
+        make_controller(f"mpc-{objective}"),
+        n,
+        seed,
+        keep_trajectories=n,
+        initial_states=initial_states,
+        dispersions=dispersions,
+    )
+    s, a, nx, d, ep = [], [], [], [], []
+    for i, (path, acts) in enumerate(zip(ro.trajectories, ro.actions, strict=True)):
+        t = len(acts)
+        s.append(path[:-1])
+        nx.append(path[1:])
+        a.append(acts)
+        done = np.zeros(t, dtype=bool)
+        done[-1] = bool(ro.terminated[i])
+        d.append(done)
+        ep.append(np.full(t, first_episode + i))
+    return {
+        "states": np.concatenate(s),
+        "actions": np.concatenate(a).astype(np.int64),
+        "next_states": np.concatenate(nx),
+        "dones": np.concatenate(d),
+        "episode": np.concatenate(ep).astype(np.int64),
+        "landed": ro.landed.copy(),
+    }
+
+
+def mpc_demonstrations(
+    n_episodes: int,
+    seed: int,
+    objective: str = "fuel",
+    *,
+    dispersions: Any = "",
+    initial_states: np.ndarray | None = None,
+    workers: int | None = None,
+    chunk: int = DEMO_CHUNK_EPISODES,
+) -> dict[str, np.ndarray]:
+    """Physical 1-step transitions of the MPC teacher flying episodes 0..n_episodes-1 (episode
+    i: env seed seed + i, disturbances on; initial state sampled from Table 3 or row i of
+    `initial_states`): states, actions, next_states, dones, episode and success_rate, as
+    `controller_demos`. `dispersions` as `pd_core.evaluate.rollout`; `workers` None = every
+    core."""
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    if objective not in ocp.OBJECTIVES:
+        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
+    init = None if initial_states is None else np.asarray(initial_states, dtype=float)
+    tasks = [
+        (
+            objective,
+            min(chunk, n_episodes - k),
+            seed + k,
+            k,
+            dispersions,
+            None if init is None else init[k : k + chunk],
+        )
+        for k in range(0, n_episodes, chunk)
+    ]
+    parts = _map_chunks(_fly_chunk, tasks, workers)
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "landed"}
+    out["success_rate"] = np.array(float(np.mean(np.concatenate([p["landed"] for p in parts]))))
+    return out
+
+
+def ocp_first_action(state: np.ndarray, objective: str) -> int | None:
+    """Eq. 5 action of the first step of the OCP solved from `state` (7,) with the RL thrust
+    limits (Sec. 4.1), or None when it has no solution."""
+    res = ocp.solve(state[0:3], state[3:6], state[6], objective=objective, limits=RL_THRUST)
+    if not res.success:
+        return None
+    a_star, v_next = disc.reference(res, RL_THRUST)
+    n = np.asarray(DEFAULT_ACTIONS.n_per_axis)
+    levels = disc.eq5_levels(a_star[0], v_next[0] - state[3:6], n)
+    return int(DEFAULT_ACTIONS.levels_to_action(levels[None])[0])
+
+
+def _label_chunk(states: np.ndarray, objective: str) -> tuple[np.ndarray, np.ndarray]:
+    fallback = ZemZevController()
+    labels = np.empty(len(states), dtype=np.int64)
+    solved = np.zeros(len(states), dtype=bool)
+    for i, s in enumerate(states):
+        a = ocp_first_action(s, objective)
+        solved[i] = a is not None
+        labels[i] = fallback.act(s) if a is None else a
+    return labels, solved
+
+
+def dagger_labels(
+    states: np.ndarray,
+    objective: str = "fuel",
+    *,
+    workers: int | None = None,
+    chunk: int = LABEL_CHUNK_STATES,
+    return_solved: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Expert labels (B,) int64: the OCP's discretised first action from each state (B, 7).
+
+    A state from which the OCP has no solution (on or below the pad, out of fuel, beyond the
+    thrust) gets the ZEM/ZEV action instead; `return_solved` also returns which were solved.
+    """
+    s = np.atleast_2d(np.asarray(states, dtype=float))
+    if objective not in ocp.OBJECTIVES:
+        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
+    tasks = [(s[k : k + chunk], objective) for k in range(0, len(s), chunk)]
+    parts = _map_chunks(_label_chunk, tasks, workers) if tasks else []
+    labels = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+    solved = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=bool)
+    return (labels, solved) if return_solved else labels
