@@ -34,6 +34,7 @@ from pd_core.evaluate import (
     to_json,
 )
 from pd_core.policy import PolicyLoadError
+from pd_core.table7 import table7_blocks
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,14 +63,16 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=MODEL",
-        help="other policies (or controllers as NAME=controller:zemzev) for Fig. 7",
+        help="other policies (or controllers as NAME=controller:zemzev) flown on the same "
+        "episodes: Table 7 blocks side by side, Figs. 5 and 7",
     )
     p.add_argument(
         "--training-log",
         action="append",
         default=[],
         metavar="NAME=EPISODES_CSV",
-        help="episodes.csv of training runs for Fig. 5",
+        help="episodes.csv of training runs for Fig. 5 (a model's <stem>.episodes.csv beside it "
+        "is used without this flag)",
     )
     p.add_argument("--name", help="name of the evaluated agent in the report")
     g = p.add_argument_group("dispersion campaigns and Ray")
@@ -105,28 +108,45 @@ def main(argv: list[str] | None = None) -> int:
     if bool(args.model) == bool(args.controller):
         print("pd-eval: give a model file or --controller (not both)", file=sys.stderr)
         return 2
+    if args.episodes < 1 or args.fuel_optimal < 0 or (args.shards is not None and args.shards < 1):
+        print("pd-eval: --episodes and --shards must be >= 1, --fuel-optimal >= 0", file=sys.stderr)
+        return 2
     spec = args.model or f"controller:{args.controller}"
     try:
         actor, name = load_actor(spec)
         if args.dispersions:
             return campaign_main(args, spec, args.name or name)
         ro = _rollouts(args, spec, actor)
+        others = _compared(args)
     except (PolicyLoadError, ValueError, RuntimeError) as exc:
         print(f"pd-eval: {exc}", file=sys.stderr)
         return 2
     name = args.name or name
     fo = fuel_optimal_ratios(ro, args.fuel_optimal) if args.fuel_optimal > 0 else None
     summary = summarise(ro, fo)
+    compared = {n: summarise(r) for n, (_spec, r) in others.items()}
     figures: dict[str, str] = {}
     if args.figures:
-        figures = write_figures(args, actor, name, ro)
+        figures = write_figures(args, actor, name, spec, ro, others)
     if args.json:
-        print(to_json(summary, name=name, seed=args.seed, figures=figures))
+        print(to_json(summary, name=name, seed=args.seed, figures=figures, compare=compared))
     else:
         print(format_report(summary, name, args.seed))
+        if compared:
+            print("\n" + table7_blocks({name: summary, **compared}))
         for k, v in figures.items():
             print(f"figure {k}: {v}")
     return 0
+
+
+def _compared(args: argparse.Namespace) -> dict[str, tuple[str, Rollouts]]:
+    """Every --compare agent flown on the same episodes: name -> (spec, rollouts)."""
+    out = {}
+    for other in args.compare:
+        other_name, other_spec = _split(other)
+        other_actor, _ = load_actor(other_spec)
+        out[other_name] = (other_spec, _rollouts(args, other_spec, other_actor))
+    return out
 
 
 def _rollouts(args: argparse.Namespace, spec: str, actor: Any) -> Rollouts:
@@ -197,7 +217,24 @@ def _mkdir(p: Path) -> Path:
     return p
 
 
-def write_figures(args: argparse.Namespace, actor: Any, name: str, ro: Any) -> dict[str, str]:
+def training_logs(args: argparse.Namespace, specs: dict[str, str]) -> dict[str, Path]:
+    """Fig. 5's logs: --training-log, and `<model>.episodes.csv` shipped beside a model file."""
+    logs = {n: Path(p) for n, p in (_split(s) for s in args.training_log)}
+    for n, spec in specs.items():
+        csv = Path(spec).with_suffix(".episodes.csv")
+        if n not in logs and not spec.startswith("controller:") and csv.is_file():
+            logs[n] = csv
+    return logs
+
+
+def write_figures(
+    args: argparse.Namespace,
+    actor: Any,
+    name: str,
+    spec: str,
+    ro: Rollouts,
+    others: dict[str, tuple[str, Rollouts]],
+) -> dict[str, str]:
     out = Path(args.figures)
     out.mkdir(parents=True, exist_ok=True)
     figs: dict[str, str] = {}
@@ -206,19 +243,15 @@ def write_figures(args: argparse.Namespace, actor: Any, name: str, ro: Any) -> d
     figs["fig6"] = str(
         plots.fig6_trajectory(path, thrust, DT_S, out / "fig6_trajectory.png", f"Fig. 6: {name}")
     )
-    finals = {name: ro.final_states}
-    for spec in args.compare:
-        other_name, other = _split(spec)
-        other_actor, _ = load_actor(other)
-        finals[other_name] = rollout(other_actor, args.episodes, args.seed).final_states
+    finals = {name: ro.final_states, **{n: r.final_states for n, (_s, r) in others.items()}}
     figs["fig7"] = str(plots.fig7_final_distributions(finals, out / "fig7_final_states.png"))
     figs["fig8"] = str(
         plots.fig8_initial_j_vs_final_i(
             ro.initial_states, ro.final_states, out / "fig8_j0_vs_final_i.png", name
         )
     )
-    if args.training_log:
-        logs = dict(_split(s) for s in args.training_log)
+    logs = training_logs(args, {name: spec, **{n: s for n, (s, _r) in others.items()}})
+    if logs:
         figs["fig5"] = str(plots.fig5_cumulative_successes(logs, out / "fig5_successes.png"))
     (out / "figures.json").write_text(json.dumps(figs, indent=2) + "\n")
     return figs
