@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from pd_core.config import REWARD, STATE_SCALE, RewardConfig
 from pd_core.controllers import make_controller
@@ -293,8 +294,6 @@ class Trainer:
     def _progress_bar(self) -> Any:
         if not self.cfg.progress or self.quiet:
             return None
-        from tqdm import tqdm  # optional: only for an interactive run
-
         return tqdm(total=self.cfg.episodes, initial=self.c.episodes, unit="ep", smoothing=0.05)
 
     def _stop_reason(self) -> str:
