@@ -131,15 +131,21 @@ def run(args: argparse.Namespace, out: Path, domain: int) -> int:
                 sup.check_alive()
             ex.spin_once(timeout_sec=0.05)
         wall = time.monotonic() - t0
+        # Stop the traffic (policy, then simulator), let everything in flight arrive, then stop
+        # the recorder: the bag and the probe must then hold the same messages.
+        pol.stop()
+        sim.stop()
+        t_drain = time.monotonic() + 2.0
+        while time.monotonic() < t_drain:
+            ex.spin_once(timeout_sec=0.05)
         bag_note = ""
         if rec is not None:
             rec.stop(sig=signal.SIGTERM)
             bag = read_bag(out / "bag")
             in_bag = {t: sum(1 for m in bag.messages if m[0] == "/" + t) for t in probe.counts}
-            bag_note = ", ".join(f"{t} {n}" for t, n in in_bag.items())
-        t_drain = time.monotonic() + 2.0
-        while time.monotonic() < t_drain:
-            ex.spin_once(timeout_sec=0.05)
+            bag_note = ", ".join(
+                f"{t} {n} ({probe.counts[t] - n} fewer than heard)" for t, n in in_bag.items()
+            )
         report(args, probe, sim.log(), pol.log(), rec.log() if rec else "", bag_note, rss, wall)
     finally:
         sup.stop_all()
