@@ -4,7 +4,7 @@ Examples:
     pd-sweep --preset best --seeds 1 2 --max-minutes 2
     pd-sweep --preset best --grid lr=1e-3,3e-4 --grid n_step=1,3 --seeds 1 2 3 --max-minutes 30
     pd-sweep --preset paper-agent2 --preset best --seeds 1 2 --set eval_every_s=60 --json
-    pd-sweep --resume sweeps/sweep-20260101-120000        # after an interruption
+    pd-sweep --resume runs/sweep-20260101-120000          # after an interruption
     pd-sweep ... --address auto                           # on a running cluster (ray start)
 """
 
@@ -49,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="pd-train field fixed for every trial (repeatable)",
     )
     p.add_argument("--max-minutes", type=float, help="training budget of every trial (minutes)")
-    p.add_argument("--dir", help="sweep folder (default sweeps/sweep-<time>)")
+    p.add_argument("--dir", help="sweep folder (default runs/sweep-<time>)")
     p.add_argument("--resume", metavar="SWEEP_DIR", help="resume an interrupted sweep")
     p.add_argument("--asha", action="store_true", help="stop weak trials early (ASHA; off)")
     p.add_argument("--concurrent", type=int, help="trials at once (default: the cluster's CPUs)")
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             if not (sweep_dir / sweep.SPEC).is_file():
                 raise ValueError(f"{sweep_dir} holds no {sweep.SPEC}: not a pd-sweep folder")
         else:
-            sweep_dir = Path(args.dir or f"sweeps/sweep-{time.strftime('%Y%m%d-%H%M%S')}")
+            sweep_dir = Path(args.dir or f"runs/sweep-{time.strftime('%Y%m%d-%H%M%S')}")
             fixed = sweep.parse_assignments(args.set, many=False)
             if args.max_minutes is not None:
                 fixed["max_minutes"] = args.max_minutes
