@@ -62,3 +62,19 @@ def test_figures_are_written(tmp_path):
         plots.fig8_initial_j_vs_final_i(ro.initial_states, ro.final_states, tmp_path / "f8.png"),
     ):
         assert p.stat().st_size > 1000
+
+
+def test_flying_a_controller_imports_neither_torch_nor_ray():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from pd_core.campaign import run_campaign\n"
+        "from pd_core.dispersions import SCENARIOS\n"
+        "run_campaign({'z': 'controller:zemzev'}, [SCENARIOS['all']], 3, seed=0)\n"
+        "import pd_core.cli.evaluate\n"
+        "print(sorted(m for m in ('torch', 'ray') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
