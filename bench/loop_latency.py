@@ -28,7 +28,7 @@ import numpy as np
 import rclpy
 from pd_ros_common.convert import state_msg
 from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.process import Supervisor
+from pd_ros_common.process import ProcessError, Supervisor
 from pd_ros_common.qos import LOOP_PUB_QOS, LOOP_SUB_QOS
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -66,6 +66,89 @@ def model_path(arg: str, tmp: Path) -> tuple[str, str]:
     return str(save_policy(tmp / "untrained.pt", QNetwork())), "untrained (no shipped model yet)"
 
 
+def measure_latency(args, sup: Supervisor, node: Node, ex, model: str, kind: str) -> dict:
+    """State published -> command received, through a real pd_policy_node process."""
+    pol = sup.node("pd_policy_node", {"model_path": model, "stats_period_s": 0.0})
+    got: list[tuple[float, ThrustCommand]] = []
+    node.create_subscription(
+        ThrustCommand,
+        names.COMMAND_TOPIC,
+        lambda m: got.append((time.perf_counter(), m)),
+        LOOP_SUB_QOS,
+    )
+    pub = node.create_publisher(LanderState, names.STATE_TOPIC, LOOP_PUB_QOS)
+    deadline = time.monotonic() + 60
+    while pub.get_subscription_count() < 1 or node.count_publishers(names.COMMAND_TOPIC) < 1:
+        if time.monotonic() > deadline or not pol.alive:
+            raise ProcessError(f"policy node did not come up:\n{pol.tail()}")
+        ex.spin_once(timeout_sec=0.05)
+    time.sleep(0.5)
+    sim = Simulator(seed=0)
+    sim.reset()
+    lat: list[float] = []
+    lost = 0
+    for i in range(args.steps + 20):  # 20 warm-up steps, not counted
+        if not sim.flying:
+            sim.reset()
+        msg = state_msg(sim.episode, sim.step, sim.time_s, sim.state, sim.status)
+        got.clear()
+        t0 = time.perf_counter()
+        pub.publish(msg)
+        end = t0 + 1.0
+        while not got and time.perf_counter() < end:
+            ex.spin_once(timeout_sec=0.1)
+        if not got:
+            lost += 1
+            sim.advance()
+            continue
+        t1, cmd = got[0]
+        if i >= 20:
+            lat.append(t1 - t0)
+        t = cmd.thrust
+        sim.submit(Command(cmd.episode, cmd.step, cmd.action, (t.x, t.y, t.z)))
+        sim.advance()
+        time.sleep(0.002)
+    q = percentiles_ms(lat)
+    print(
+        f"state published -> command received over DDS ({kind} model), "
+        f"{q['n']} steps: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, max {q['max']:.3f} ms"
+        f"  [target p99 < 5 ms: {'met' if q['p99'] < 5 else 'NOT met'}]; lost {lost}",
+        flush=True,
+    )
+    pol.stop()
+    return {**q, "lost": lost}
+
+
+def measure_jitter(args, sup: Supervisor, node: Node, ex) -> dict:
+    """Period jitter of a real pd_sim_node process at 5 Hz, at a subscriber."""
+    arrivals: list[float] = []
+    node.create_subscription(
+        LanderState, names.STATE_TOPIC, lambda m: arrivals.append(time.monotonic()), LOOP_SUB_QOS
+    )
+    # No policy here: the simulator flies at once (start_wait_s 0), holding zero thrust.
+    params = {"auto_restart": True, "start_wait_s": 0.0, "tick_priority": args.tick_priority}
+    simp = sup.node("pd_sim_node", params)
+    deadline = time.monotonic() + 60
+    while len(arrivals) < 3:
+        if time.monotonic() > deadline or not simp.alive:
+            raise ProcessError(f"simulator did not come up:\n{simp.tail()}")
+        ex.spin_once(timeout_sec=0.05)
+    arrivals.clear()
+    end = time.monotonic() + args.jitter_s
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+    q = percentiles_ms(np.abs(np.diff(arrivals) - 0.2))
+    rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
+    print(
+        f"simulator period jitter at 5 Hz (|period - 200 ms| at a subscriber), "
+        f"{q['n']} periods: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, "
+        f"max {q['max']:.3f} ms; mean rate {rate:.4f} Hz"
+        f"  [target p99 < 2 ms: {'met' if q['p99'] < 2 else 'NOT met'}]",
+        flush=True,
+    )
+    return {**q, "rate_hz": rate, "tick_priority": args.tick_priority}
+
+
 def main() -> int:
     args = parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="pd_bench_"))
@@ -79,99 +162,13 @@ def main() -> int:
     ex.add_node(node)
     report: dict = {"model": model_kind, "cpu_count": os.cpu_count()}
     try:
-        # ------------------------------------------------------------ 1. latency
-        pol = sup.node("pd_policy_node", {"model_path": model, "stats_period_s": 0.0})
-        got: list[tuple[float, ThrustCommand]] = []
-        node.create_subscription(
-            ThrustCommand,
-            names.COMMAND_TOPIC,
-            lambda m: got.append((time.perf_counter(), m)),
-            LOOP_SUB_QOS,
-        )
-        pub = node.create_publisher(LanderState, names.STATE_TOPIC, LOOP_PUB_QOS)
-        deadline = time.monotonic() + 60
-        while pub.get_subscription_count() < 1 or node.count_publishers(names.COMMAND_TOPIC) < 1:
-            if time.monotonic() > deadline or not pol.alive:
-                print(f"policy node did not come up:\n{pol.tail()}", file=sys.stderr)
-                return 1
-            ex.spin_once(timeout_sec=0.05)
-        time.sleep(0.5)
-        sim = Simulator(seed=0)
-        sim.reset()
-        lat: list[float] = []
-        lost = 0
-        for i in range(args.steps + 20):  # 20 warm-up steps, not counted
-            if not sim.flying:
-                sim.reset()
-            msg = state_msg(sim.episode, sim.step, sim.time_s, sim.state, sim.status)
-            got.clear()
-            t0 = time.perf_counter()
-            pub.publish(msg)
-            end = t0 + 1.0
-            while not got and time.perf_counter() < end:
-                ex.spin_once(timeout_sec=0.1)
-            if not got:
-                lost += 1
-                sim.advance()
-                continue
-            t1, cmd = got[0]
-            if i >= 20:
-                lat.append(t1 - t0)
-            t = cmd.thrust
-            sim.submit(Command(cmd.episode, cmd.step, cmd.action, (t.x, t.y, t.z)))
-            sim.advance()
-            time.sleep(0.002)
-        q = percentiles_ms(lat)
-        report["latency_ms"] = {**q, "lost": lost}
-        print(
-            f"state published -> command received over DDS ({model_kind} model), "
-            f"{q['n']} steps: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, max {q['max']:.3f} ms"
-            f"  [target p99 < 5 ms: {'met' if q['p99'] < 5 else 'NOT met'}]; lost {lost}",
-            flush=True,
-        )
-        pol.stop()
-
-        # ------------------------------------------------------------ 2. jitter at 5 Hz
+        report["latency_ms"] = measure_latency(args, sup, node, ex, model, model_kind)
         if args.jitter_s > 0:
-            arrivals: list[float] = []
-            node.create_subscription(
-                LanderState,
-                names.STATE_TOPIC,
-                lambda m: arrivals.append(time.monotonic()),
-                LOOP_SUB_QOS,
-            )
-            # No policy here: the simulator flies at once (start_wait_s 0), holding zero thrust.
-            simp = sup.node(
-                "pd_sim_node",
-                {
-                    "auto_restart": True,
-                    "start_wait_s": 0.0,
-                    "tick_priority": args.tick_priority,
-                },
-            )
-            deadline = time.monotonic() + 60
-            while len(arrivals) < 3:
-                if time.monotonic() > deadline or not simp.alive:
-                    print(f"simulator did not come up:\n{simp.tail()}", file=sys.stderr)
-                    return 1
-                ex.spin_once(timeout_sec=0.05)
-            arrivals.clear()
-            end = time.monotonic() + args.jitter_s
-            while time.monotonic() < end:
-                ex.spin_once(timeout_sec=0.05)
-            periods = np.diff(arrivals)
-            dev = np.abs(periods - 0.2)
-            q = percentiles_ms(dev)
-            rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
-            report["jitter_ms"] = {**q, "rate_hz": rate, "tick_priority": args.tick_priority}
-            print(
-                f"simulator period jitter at 5 Hz (|period - 200 ms| at a subscriber), "
-                f"{q['n']} periods: p50 {q['p50']:.3f} ms, p99 {q['p99']:.3f} ms, "
-                f"max {q['max']:.3f} ms; mean rate {rate:.4f} Hz"
-                f"  [target p99 < 2 ms: {'met' if q['p99'] < 2 else 'NOT met'}]",
-                flush=True,
-            )
+            report["jitter_ms"] = measure_jitter(args, sup, node, ex)
         print(json.dumps(report))
+    except ProcessError as exc:
+        print(exc, file=sys.stderr)
+        return 1
     finally:
         sup.stop_all()
         ex.remove_node(node)

@@ -190,13 +190,16 @@ def _string(buf: memoryview, at: int) -> tuple[str, int]:
     return bytes(buf[at + 4 : at + 4 + n]).decode(), at + 4 + n
 
 
-def _records(f: BinaryIO) -> Iterator[tuple[int, memoryview]]:
-    """(opcode, content) of each complete record; stops at the first truncated one."""
+def _records(f: BinaryIO, end: int) -> Iterator[tuple[int, memoryview]]:
+    """(opcode, content) of each complete record before offset `end`; stops at the first
+    truncated (or garbled: longer than what is left) one."""
     while True:
         head = f.read(9)
         if len(head) < 9:
             return
         op, length = struct.unpack("<BQ", head)
+        if length > end - f.tell():
+            return
         content = f.read(length)
         if len(content) < length:
             return
@@ -208,7 +211,7 @@ def _scan_mcap(path: Path, bag: Bag, topics: list[str] | None) -> None:
     with open(path, "rb") as f:
         if f.read(8) != MCAP_MAGIC:
             raise BagError(f"{path}: not an MCAP file")
-        _scan_records(_records(f), bag, topics, {}, {})
+        _scan_records(_records(f, path.stat().st_size), bag, topics, {}, {})
 
 
 def _scan_records(
@@ -219,25 +222,40 @@ def _scan_records(
     channels: dict[int, str],
 ) -> None:
     for op, rec in records:
-        if op == 0x03:  # schema: id, name, encoding, data
-            (sid,) = struct.unpack_from("<H", rec, 0)
-            schemas[sid] = _string(rec, 2)[0]
-        elif op == 0x04:  # channel: id, schema id, topic, encoding, metadata
-            cid, sid = struct.unpack_from("<HH", rec, 0)
-            topic, at = _string(rec, 4)
-            _, at = _string(rec, at)
-            (n,) = struct.unpack_from("<I", rec, at)
-            channels[cid] = topic
-            offered = get_qos(bytes(rec[at + 4 : at + 4 + n]))
-            bag.topics.setdefault(topic, (schemas.get(sid, ""), offered))
-        elif op == 0x05:  # message: channel, sequence, log time, publish time, data
-            cid, _, stamp = struct.unpack_from("<HIQ", rec, 0)
-            topic = channels.get(cid)
-            if topic is not None and (topics is None or topic in topics):
-                bag.messages.append((topic, stamp, bytes(rec[22:])))
-        elif op == 0x06:  # chunk: start, end, size, crc, compression, records
-            _, _, size, crc = struct.unpack_from("<QQQI", rec, 0)
-            compression, at = _string(rec, 28)
-            (n,) = struct.unpack_from("<Q", rec, at)
-            data = decompress(bytes(rec[at + 8 : at + 8 + n]), compression, size, crc)
-            _scan_records(_records(io.BytesIO(data)), bag, topics, schemas, channels)
+        try:
+            _scan_record(op, rec, bag, topics, schemas, channels)
+        except (struct.error, ValueError, UnicodeDecodeError, IndexError):
+            return  # a garbled record: keep what came before it
+
+
+def _scan_record(
+    op: int,
+    rec: memoryview,
+    bag: Bag,
+    topics: list[str] | None,
+    schemas: dict[int, str],
+    channels: dict[int, str],
+) -> None:
+    """One record: schemas and channels are remembered, messages added to `bag`."""
+    if op == 0x03:  # schema: id, name, encoding, data
+        (sid,) = struct.unpack_from("<H", rec, 0)
+        schemas[sid] = _string(rec, 2)[0]
+    elif op == 0x04:  # channel: id, schema id, topic, encoding, metadata
+        cid, sid = struct.unpack_from("<HH", rec, 0)
+        topic, at = _string(rec, 4)
+        _, at = _string(rec, at)
+        (n,) = struct.unpack_from("<I", rec, at)
+        channels[cid] = topic
+        offered = get_qos(bytes(rec[at + 4 : at + 4 + n]))
+        bag.topics.setdefault(topic, (schemas.get(sid, ""), offered))
+    elif op == 0x05:  # message: channel, sequence, log time, publish time, data
+        cid, _, stamp = struct.unpack_from("<HIQ", rec, 0)
+        topic = channels.get(cid)
+        if topic is not None and (topics is None or topic in topics):
+            bag.messages.append((topic, stamp, bytes(rec[22:])))
+    elif op == 0x06:  # chunk: start, end, size, crc, compression, records
+        _, _, size, crc = struct.unpack_from("<QQQI", rec, 0)
+        compression, at = _string(rec, 28)
+        (n,) = struct.unpack_from("<Q", rec, at)
+        data = decompress(bytes(rec[at + 8 : at + 8 + n]), compression, size, crc)
+        _scan_records(_records(io.BytesIO(data), len(data)), bag, topics, schemas, channels)

@@ -70,19 +70,20 @@ def main(argv: list[str] | None = None) -> int:
         remap[src] = dst
     try:
         bag = read_bag(args.bag, args.topics)
-    except (BagError, OSError, ValueError, KeyError) as exc:
+    except (BagError, OSError, ValueError, KeyError, MemoryError) as exc:
         print(f"pd_replay: cannot read {args.bag}: {exc}", file=sys.stderr)
         return 2
     types = {t: v for t, v in bag.topics.items() if args.topics is None or t in args.topics}
+    if not types:
+        damaged = " (no metadata or footer, nothing recoverable)" if bag.recovered else ""
+        print(f"pd_replay: no matching topics in {args.bag}{damaged}", file=sys.stderr)
+        return 2
     if bag.recovered:
         print(
             f"pd_replay: {args.bag} has no metadata or footer (recorder killed?); "
             f"recovered {len(bag.messages)} messages",
             flush=True,
         )
-    if not types:
-        print(f"pd_replay: no matching topics in {args.bag}", file=sys.stderr)
-        return 2
 
     rclpy.init(args=["pd_replay", *ros_args])
     node = Replayer()

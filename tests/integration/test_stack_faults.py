@@ -234,3 +234,26 @@ def _rejected_total(log: str) -> int:
     rejected = [int(n) for n in re.findall(r"\[(\d+) rejected so far\]", log)]
     lost = [int(n) for n in re.findall(r"\[(\d+) lost so far\]", log)]
     return max(rejected, default=0) + max(lost, default=0)
+
+
+@pytest.mark.parametrize(
+    ("content", "says"),
+    [
+        (None, "no such bag folder"),
+        (b"not an mcap file at all" * 50, "not an MCAP file"),
+        (b"\x89MCAP0\r\n" + bytes(range(256)) * 8, "no matching topics"),
+    ],
+)
+def test_replay_of_a_damaged_bag_is_one_line(tmp_path, content, says):
+    bag = tmp_path / "bag"
+    if content is not None:
+        bag.mkdir()
+        (bag / "bag.mcap").write_bytes(content)
+    procs = ProcessSet(tmp_path)
+    try:
+        rep = procs.start("pd_replay", [executable("pd_bringup", "pd_replay"), str(bag)])
+        assert wait_for(lambda: not rep.alive, 60.0)
+        lines = rep.log().strip().splitlines()
+        assert rep.proc.returncode == 2 and len(lines) == 1 and says in lines[0], rep.log()
+    finally:
+        procs.stop_all()
