@@ -107,6 +107,7 @@ def _with(**changes):
         (GOOD, {"method": "magic"}, "unknown method"),
         (GOOD, {"objective": "speed"}, "unknown objective"),
         (GOOD, {"timeout": -1.0}, "timeout"),
+        (GOOD, {"timeout": 1e-9}, "too short to start a solve"),  # no earlier solve to blame
     ],
 )
 def test_bad_requests_get_success_false(client, state, fields, says):
