@@ -28,14 +28,14 @@ class ParameterError(ValueError):
 
 def _type_name(default: Any) -> str:
     if isinstance(default, bool):
-        return "bool"
+        return "a bool"
     if isinstance(default, float):
-        return "double (an integer is fine too)"
+        return "a double (an integer is fine too)"
     if isinstance(default, int):
-        return "integer"
+        return "an integer"
     if isinstance(default, str):
-        return "string"
-    return "list of doubles"
+        return "a string"
+    return "a list of doubles"
 
 
 def _number(v: Any) -> bool:
@@ -56,7 +56,7 @@ def coerce(name: str, default: Any, value: Any) -> Any:
         ok = isinstance(value, (list, tuple)) and all(_number(v) for v in value)
     if not ok:
         raise ParameterError(
-            f"parameter {name}: expected a {_type_name(default)}, got {value!r} "
+            f"parameter {name}: expected {_type_name(default)}, got {value!r} "
             f"({type(value).__name__})"
         )
     if isinstance(default, float):

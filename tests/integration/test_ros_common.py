@@ -1,0 +1,94 @@
+"""pd_ros_common's pure parts: parameter coercion and checks, sequence gaps, names, domains."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.gaps import SequenceGaps
+
+from pd_ros_common import names, params
+
+pytestmark = [pytest.mark.integration]
+
+SPEC = {
+    "rate_hz": (5.0, "a double"),
+    "seed": (0, "an integer"),
+    "lockstep": (False, "a bool"),
+    "mode": ("hold", "a string"),
+    "state": ([0.0], "doubles"),
+}
+CHECKS = {"rate_hz": params.above(0.0), "mode": params.one_of(("hold", "zero"))}
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "want"),
+    [
+        ("rate_hz", 10, 10.0),
+        ("rate_hz", 2.5, 2.5),
+        ("seed", 7, 7),
+        ("lockstep", True, True),
+        ("mode", "zero", "zero"),
+        ("state", [0, 1, 2.5], [0.0, 1.0, 2.5]),
+    ],
+)
+def test_values_coerced(name, value, want):
+    got = params.check_value(name, value, SPEC, CHECKS)
+    assert got == want and type(got) is type(want)
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "says"),
+    [
+        ("rate_hz", "abc", "parameter rate_hz: expected a double"),
+        ("rate_hz", True, "expected a double"),
+        ("rate_hz", 0, "parameter rate_hz: must be > 0 (got 0.0)"),
+        ("rate_hz", float("nan"), "must be > 0"),
+        ("seed", 1.5, "parameter seed: expected an integer"),
+        ("lockstep", 1, "expected a bool"),
+        ("mode", "bogus", "parameter mode: must be one of hold, zero (got 'bogus')"),
+        ("state", ["x"], "expected a list of doubles"),
+    ],
+)
+def test_bad_values_refused_in_one_line(name, value, says):
+    with pytest.raises(params.ParameterError) as err:
+        params.check_value(name, value, SPEC, CHECKS)
+    assert says.replace("a integer", "an integer") in str(err.value).replace(
+        "a integer", "an integer"
+    )
+    assert "\n" not in str(err.value)
+
+
+def _info(gid: bytes, seq: int) -> dict:
+    return {"publisher_gid": {"data": gid}, "publication_sequence_number": seq}
+
+
+def test_sequence_gaps_per_publisher():
+    gaps = SequenceGaps()
+    assert gaps.update(_info(b"a", 5)) == (0, 0, 0)  # first seen: earlier ones are not lost
+    assert gaps.update(_info(b"b", 1)) == (0, 0, 0)
+    assert gaps.update(_info(b"a", 6)) == (0, 0, 0)
+    assert gaps.update(_info(b"a", 10)) == (3, 7, 9)
+    assert gaps.update(_info(b"b", 2)) == (0, 0, 0)
+    assert gaps.update(_info(b"a", 9)) == (0, 0, 0)  # late, not a new gap
+    assert gaps.update({"publication_sequence_number": None}) == (0, 0, 0)
+    assert gaps.total == 3
+
+
+def test_names_are_relative_and_resolve():
+    assert all(not n.startswith("/") for n in (*names.LANDER_TOPICS, names.RESET_SERVICE))
+    assert names.resolve(names.STATE_TOPIC) == "/lander/state"
+    assert names.resolve(names.OCP_SERVICE, "/vehicle1") == "/vehicle1/ocp/compute_trajectory"
+
+
+def test_domain_claims_differ_and_override(monkeypatch):
+    a, fd_a = claim_domain_id()
+    b, fd_b = claim_domain_id()
+    try:
+        assert a != b and 1 <= a <= 101 and 1 <= b <= 101
+        monkeypatch.setenv("PD_FORCED_DOMAIN", "42")
+        assert claim_domain_id("PD_FORCED_DOMAIN") == (42, None)
+    finally:
+        os.close(fd_a)
+        os.close(fd_b)
