@@ -118,6 +118,8 @@ def run_trial(config: dict[str, Any]) -> None:
         trainer = Trainer.resume(run_dir, {"progress": False}, on_eval=report)
         trainer.quiet = True
     else:
+        for stale in run_dir.glob("*.csv"):  # logs of an attempt that died before checkpointing
+            stale.unlink()
         cfg = preset(t["preset"], seed=t["seed"], run_dir=str(run_dir), progress=False, **overrides)
         trainer = Trainer(cfg, run_dir=run_dir, quiet=True, on_eval=report)
     trainer.run()
