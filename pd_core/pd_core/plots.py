@@ -209,6 +209,7 @@ def campaign_summary(t: dict[str, Any], out: str | Path) -> Path:
         ax[p].grid(axis="y", alpha=0.3)
     lo = min(t["results"][n][a]["success_rate"] for n in names for a in agents) * 100
     ax[0].set_ylim(max(0.0, lo - 5.0), 100.5)
+    ax[1].set_yscale("log")  # metres to hundreds of metres
     ax[0].legend(fontsize=8, ncol=max(1, len(agents)))
     ax[-1].set_xticks(x, names, rotation=30, ha="right")
     ax[0].set_title(f"dispersion campaign: {t['episodes']} episodes per cell, seed {t['seed']}")
