@@ -151,8 +151,10 @@ def run_sweep(
     else:
         tuner = _new_tuner(sweep_dir, spec, trainable, concurrent, max_failures)
     with contextlib.redirect_stdout(sys.stderr):  # Tune's status tables: stdout stays for results
-        tuner.fit()
-    return summarise_sweep(sweep_dir)
+        grid = tuner.fit()
+    summary = summarise_sweep(sweep_dir)
+    summary["unfinished_trials"] = len(spec["trials"]) - grid.num_terminated
+    return summary
 
 
 def _new_tuner(
@@ -192,6 +194,7 @@ def trial_result(run_dir: Path) -> dict[str, Any]:
     ev = plots.read_csv(path) if path.is_file() else {}
     if not ev or not len(ev.get("wall_s", [])):
         return {"success": None, "fuel_kg": None, "minutes_to_99": None, "curve": ([], [])}
+    ev = {k: v[_surviving_rows(ev["wall_s"])] for k, v in ev.items()}
     hit = np.flatnonzero(ev["success_rate"] >= SUCCESS_TARGET)
     return {
         "success": float(ev["success_rate"][-1]),
@@ -199,6 +202,14 @@ def trial_result(run_dir: Path) -> dict[str, Any]:
         "minutes_to_99": float(ev["wall_s"][hit[0]] / 60.0) if hit.size else None,
         "curve": ((ev["wall_s"] / 60.0).tolist(), ev["success_rate"].tolist()),
     }
+
+
+def _surviving_rows(wall_s: np.ndarray) -> np.ndarray:
+    """Indices of the rows a resumed run did not supersede: a run resumed from a checkpoint
+    logs again from the checkpoint's time, so a row is kept only if every later row is later."""
+    later_min = np.minimum.accumulate(wall_s[::-1])[::-1]
+    keep = np.append(wall_s[:-1] < later_min[1:], True)
+    return np.flatnonzero(keep)
 
 
 def _stats(values: list[float | None]) -> dict[str, Any]:

@@ -86,6 +86,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"pd-sweep: {n} trials in {sweep_dir.resolve()}", file=sys.stderr)
     summary = sweep.run_sweep(sweep_dir, trials, asha=args.asha, concurrent=args.concurrent)
     print(json.dumps(summary, indent=2) if args.json else sweep.format_summary(summary))
+    if summary["unfinished_trials"]:
+        print(
+            f"pd-sweep: {summary['unfinished_trials']} trial(s) unfinished (interrupted or "
+            f"failed); continue with: pd-sweep --resume {sweep_dir}",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
