@@ -1,5 +1,6 @@
 """OCP solve time over the Table 1 cases: (a) SLSQP with SciPy finite differences (as the paper),
-(b) SLSQP with exact gradients, (c) the fast "qp" method, side by side with costs and ratios.
+(b) SLSQP with exact gradients, (c) the fast "qp" method, side by side with costs and ratios;
+(d) `qp_fuel`, the fast method on the fuel objective (HiGHS LPs through highspy; its cost is kg).
 
 Run single-threaded BLAS (OPENBLAS_NUM_THREADS=1, set below before numpy loads): on a busy
 machine multithreaded BLAS makes tiny products 100x slower.
@@ -21,6 +22,7 @@ VARIANTS = {
     "slsqp_fd": {"method": "slsqp", "exact_gradients": False},
     "slsqp_exact": {"method": "slsqp", "exact_gradients": True},
     "qp": {"method": "qp"},
+    "qp_fuel": {"method": "qp", "objective": "fuel"},
 }
 
 

@@ -46,9 +46,11 @@ def solve_lp(
     lb: np.ndarray,
     ub: np.ndarray,
     highs: highspy.Highs | None = None,
+    row_hi: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """argmin cost @ x s.t. a_eq x = b_eq, lb <= x <= ub (dense a_eq with few rows), or None.
-    `highs`: a solver object to re-use (its model is replaced; building one costs ~0.3 ms).
+    With `row_hi`, the rows are b_eq <= a_eq x <= row_hi instead. `highs`: a solver object to
+    re-use (its model is replaced; building one costs ~0.3 ms).
 
     HiGHS through `highspy` directly: the same solver as scipy's linprog(method="highs") without
     its per-call validation and presolve, 3-10x faster on these 100-500 column LPs
@@ -59,7 +61,8 @@ def solve_lp(
     lp = highspy.HighsLp()
     lp.num_col_, lp.num_row_ = cols, rows
     lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
-    lp.row_lower_ = lp.row_upper_ = b_eq
+    lp.row_lower_ = b_eq
+    lp.row_upper_ = b_eq if row_hi is None else row_hi
     lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
     lp.a_matrix_.start_ = np.arange(0, rows * cols + 1, rows)
     lp.a_matrix_.index_ = np.tile(np.arange(rows), cols)
@@ -85,12 +88,37 @@ def fuel_weights(g: Grid) -> np.ndarray:
     return g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
 
 
+def _floor_rows(pb: Problem, g: Grid, p: np.ndarray, every: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows (m, 6N) per kN, lower bounds (m,)) of z >= 0 at every `every`-th step end and the
+    last 10, linearised at p with the mass frozen: dz_i/du_j = h_j + k_j (t_i - t_j) for j <= i
+    (t: step end times). Eq. 4 has no altitude constraint (Sec. 2.1); a fuel optimum without
+    one can dive below the target and let gravity stop the climb back."""
+    fl = pb.fly(p, g)
+    n_steps, n = len(g.dt), pb.n_control
+    sel = np.union1d(np.arange(every - 1, n_steps, every), np.arange(max(n_steps - 10, 0), n_steps))
+    t_end = np.cumsum(g.dt)
+    coef = fl.h[None, :] + fl.k[None, :] * (t_end[sel, None] - t_end[None, :])
+    coef *= np.arange(n_steps)[None, :] <= sel[:, None]
+    c_ctrl = g.wt_mul(coef.T).T * KN  # (m, n_control) per kN of vertical control point
+    rows = np.zeros((len(sel), 6 * n))
+    rows[:, 4 * n : 5 * n] = c_ctrl  # T3+ columns
+    rows[:, 5 * n :] = -c_ctrl  # T3- columns
+    lower = c_ctrl @ (p[:, 2] / KN) - pb.altitudes(fl, g)[sel]
+    return rows, lower
+
+
 def fuel_lp_plan(
-    pb: Problem, g: Grid, p: np.ndarray, passes: int, highs: highspy.Highs | None = None
+    pb: Problem,
+    g: Grid,
+    p: np.ndarray,
+    passes: int,
+    highs: highspy.Highs | None = None,
+    floor_every: int = 0,
 ) -> np.ndarray | None:
     """Control points (N, 3) N after up to `passes` LP passes from p at the fixed t_f of grid g,
-    min sum_k w_k (p+ + p-) subject to the linearised terminal constraints; None if an LP is
-    infeasible. The receding-horizon teacher calls this with passes=1 and its own `highs`."""
+    min sum_k w_k (p+ + p-) subject to the linearised terminal constraints (and, with
+    `floor_every`, altitude >= 0 at every floor_every-th step); None if an LP is infeasible.
+    The receding-horizon teacher calls this with passes=1 and its own `highs`."""
     n = pb.n_control
     c = np.tile(fuel_weights(g), 6)  # [p+ axis 0, p- axis 0, p+ axis 1, ...]
     hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
@@ -99,7 +127,13 @@ def fuel_lp_plan(
     for _ in range(passes):
         jac, rhs, _ = pb.linearised(p, g)
         a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n)
-        x = solve_lp(c, a_eq, rhs, lb, ub, highs)
+        row_hi = None
+        if floor_every:
+            rows, lower = _floor_rows(pb, g, p, floor_every)
+            a_eq = np.concatenate([a_eq, rows])
+            row_hi = np.concatenate([rhs, np.full(len(lower), np.inf)])
+            rhs = np.concatenate([rhs, lower])
+        x = solve_lp(c, a_eq, rhs, lb, ub, highs, row_hi)
         if x is None:
             return None
         xs = x.reshape(3, 2, n)

@@ -210,6 +210,15 @@ class Problem:
         xf = self.x0 + self.v0 * t_f + 0.5 * GRAVITY_MPS2 * t_f**2 + (k * g.r + h) @ u
         return Flight(u, m, z, k, h, xf, vf, float(cum[-1]))
 
+    def altitudes(self, fl: Flight, g: Grid) -> np.ndarray:
+        """Altitude (m) at the end of every step of a flight: Eq. 4 has no altitude constraint
+        (Sec. 2.1), so a plan may pass below the ground; callers that fly it check this."""
+        gz = float(GRAVITY_MPS2[2])
+        dv = gz * g.dt + fl.k * fl.u[:, 2]
+        v_start = self.v0[2] + np.concatenate(([0.0], np.cumsum(dv)[:-1]))
+        dz = g.dt * v_start + 0.5 * gz * g.dt**2 + fl.h * fl.u[:, 2]
+        return self.x0[2] + np.cumsum(dz)
+
     def cost(self, fl: Flight, g: Grid) -> float:
         """Objective of a flight: N^2 s ("energy") or kg ("fuel")."""
         if self.objective == "energy":
