@@ -6,7 +6,8 @@ The controller is the trained DQN policy (`controller` dqn, the default; loaded 
 A missing or mismatched model, or an unknown controller, stops the node at start-up with one line
 naming the file or the name and what is wrong (exit status 1; a bad parameter type is status 2).
 A state with NaN, infinite or absurd values is logged and gets no command; a state whose status is
-not FLYING (the final state of an episode) needs no command and gets none. States that never
+not FLYING (the final state of an episode) needs no command and gets none, and a state sent again
+after it was answered (a lockstep resend) is not answered twice. States that never
 reach the node (a step gap within an episode, or a DDS message-lost event) are counted and logged.
 
 Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
@@ -112,6 +113,8 @@ class PolicyNode(Node):
         self.gaps = 0  # states of an episode that never arrived (step gaps)
         self.lost = 0  # DDS message-lost events
         self._last: tuple[int, int] = (0, -1)  # (episode, step) of the last state received
+        self._answered: tuple[int, int] | None = None  # ... and of the last one answered
+        self.repeats = 0  # states answered already (a lockstep resend while we were busy)
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
         self._cmd_pub = self.create_publisher(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS)
@@ -158,6 +161,11 @@ class PolicyNode(Node):
         self._count_gap(msg)
         if msg.status != LanderState.FLYING:
             return  # the episode is over: nothing to answer
+        if (msg.episode, msg.step) == self._answered:
+            # Sent again (lockstep resend) while our answer was on its way: a slow controller
+            # would otherwise pile up solves of the same state. A new node still answers it.
+            self.repeats += 1
+            return
         try:
             state = check_state(state_from_msg(msg))
             action = self.policy.act(state)
@@ -170,6 +178,7 @@ class PolicyNode(Node):
                 )
             return
         self._cmd_pub.publish(command_msg(msg, action, self.policy.thrust(action)))
+        self._answered = (msg.episode, msg.step)
         dt = time.perf_counter() - t0
         self._times.append(dt)
         self._since_log.append(dt)
@@ -186,8 +195,8 @@ class PolicyNode(Node):
 
     def _counts(self) -> str:
         return (
-            f"{self.answered} answered, {self.invalid} invalid, {self.gaps} missing (step "
-            f"gaps), {self.lost} lost (DDS) states in all"
+            f"{self.answered} answered, {self.repeats} repeated, {self.invalid} invalid, "
+            f"{self.gaps} missing (step gaps), {self.lost} lost (DDS) states in all"
         )
 
     def _log_stats(self) -> None:

@@ -23,7 +23,7 @@ from pd_core.actions import DEFAULT_ACTIONS
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
 
 QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

@@ -7,14 +7,14 @@ import json
 import pytest
 from helpers import ProcessSet, make_model, wait_for
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 
 
 def _start(tmp_path, model_path: str):
     procs = ProcessSet(tmp_path)
     try:
         p = procs.node("pd_policy_node", {"model_path": model_path})
-        assert wait_for(lambda: not p.alive, 45.0), "the node did not stop"
+        assert wait_for(lambda: not p.alive, 120.0), "the node did not stop"  # loaded machine
         return p.proc.returncode, p.log()
     finally:
         procs.stop_all()

@@ -245,12 +245,14 @@ def test_bad_constructor_arguments():
 def test_ticker_keeps_rate_without_drift():
     ticks: list[float] = []
     ticker = FixedRateTicker(0.02, lambda: ticks.append(time.monotonic()))
+    t0 = time.monotonic()
     ticker.start()
     time.sleep(0.5)
     ticker.stop()
+    elapsed = time.monotonic() - t0  # the sleep may overrun on a loaded machine
     assert ticker.error is None
     periods = np.diff(ticks)
-    assert 20 <= len(ticks) <= 26
+    assert 20 <= len(ticks) <= elapsed / 0.02 + 1
     # drift-free: the mean period is the nominal one even if single wake-ups are late
     assert abs((ticks[-1] - ticks[0]) / (len(ticks) - 1) - 0.02) < 0.002
     assert np.all(periods > 0)
