@@ -7,7 +7,7 @@ current step must arrive before the next tick; otherwise the step is flown with 
 command held, or with zero thrust (`missing_command`). An episode started at start-up or by
 sim/reset waits for the first command answering its step 0 before its clock starts (the state is
 published again every `resend_s` meanwhile), so a policy that is still loading never misses the
-first steps; after `start_wait_s` without one it flies anyway, with a warning.
+first steps (`start_wait_s` can bound the wait: then it flies without one, with a warning).
 
 Lockstep mode: the simulator advances as soon as a valid command answering the current step has
 arrived, so an episode flies as fast as the policy answers and is deterministic. If no answer
@@ -59,10 +59,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "lockstep, and in real time while an episode waits for its first command (0 = never).",
     ),
     "start_wait_s": (
-        60.0,
+        -1.0,
         "Real time: an episode started at start-up or by sim/reset starts its clock when the "
-        "first command answering step 0 arrives, or after this many seconds without one "
-        "(flying without commands, with a warning). 0 = start at once.",
+        "first command answering step 0 arrives: -1 = however long that takes, > 0 = at most "
+        "this many seconds (then it flies without commands, with a warning), 0 = at once.",
     ),
     "missing_command": (
         "hold",
@@ -109,7 +109,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 CHECKS: dict[str, params.Check] = {
     "rate_hz": params.above(0.0),
     "resend_s": params.at_least(0.0),
-    "start_wait_s": params.at_least(0.0),
+    "start_wait_s": lambda v: None if v == -1 or v >= 0 else "must be -1 (no limit) or >= 0",
     "missing_command": params.one_of(MISSING_COMMAND_MODES),
     "seed": params.at_least(-1),
     "max_time_s": params.at_least(DT_S),
@@ -198,7 +198,7 @@ class SimNode(Node):
     def _start_episode(self, initial_state: np.ndarray | None, seed: int | None, wait: bool) -> int:
         """Reset the simulator and publish step 0 (caller holds the lock). ValueError passes.
 
-        Real time: the clock starts now, or (`wait` and start_wait_s > 0) when the first
+        Real time: the clock starts now, or (`wait` and start_wait_s != 0) when the first
         command answering step 0 arrives.
         """
         episode, init, interrupted = self._sim.reset(initial_state, seed)
@@ -213,7 +213,7 @@ class SimNode(Node):
         self._stop_ticker()
         self._waiting_since = None
         if not self.lockstep:
-            if wait and self.start_wait_s > 0:
+            if wait and self.start_wait_s != 0:
                 self._waiting_since = time.monotonic()
             else:
                 self._start_ticker()
@@ -328,7 +328,8 @@ class SimNode(Node):
             if not self._sim.flying or (not self.lockstep and self._waiting_since is None):
                 return
             now = time.monotonic()
-            if self._waiting_since is not None and now - self._waiting_since > self.start_wait_s:
+            waited = now - self._waiting_since if self._waiting_since is not None else 0.0
+            if self.start_wait_s > 0 and waited > self.start_wait_s:
                 self.get_logger().warning(
                     f"no command for step 0 of episode {self._sim.episode} within "
                     f"{self.start_wait_s:g} s: flying without (missing_command applies)"
