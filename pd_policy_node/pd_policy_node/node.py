@@ -30,7 +30,6 @@ from rclpy.node import Node
 
 import pd_core
 from pd_core.config import TABLE3
-from pd_core.controllers import make_controller
 from pd_core.policy import PolicyLoadError
 from pd_core.state import check_state
 from pd_interfaces.msg import LanderState, ThrustCommand
@@ -89,6 +88,9 @@ def load_controller(name: str, model_path: str) -> tuple[Any, str]:
             f"{path} (network {meta['network']['hidden']}, {policy.actions.n} actions, "
             f"code {meta.get('code_version', '?')})"
         )
+    # Optional heavy dependency (the MPC teachers import the OCP solvers): only when asked for.
+    from pd_core.controllers import make_controller
+
     try:
         return make_controller(name), f"reference controller {name}"
     except ValueError as exc:

@@ -31,7 +31,7 @@ QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
-START_S = 30.0  # deadline for a node process to come up (2 cores shared with other work)
+START_S = 90.0  # deadline for a node process to come up (2 cores shared with other work)
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
-START_S = 30.0
+START_S = 90.0
 
 
 @pytest.fixture(scope="module")
