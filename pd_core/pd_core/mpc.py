@@ -16,16 +16,23 @@ flies the plan's first step quantised to one of the 147 actions, and re-plans at
 * **Low gate.** Plans end at rest `gate_altitude_m` (2 m) above the pad, not on it: rest exactly
   on the pad at t_f -> 0 asks for infinite precision and leaves no room to correct.
 * **Action (Eq. 5).** a* is the plan's first-step thrust normalised over the RL limits, and the
-  level above or below it is chosen by the sign of the velocity error dv = v*_{t+1} - v_t
-  against the plan's next state (`pd_core.discretise.eq5_levels`, the rounding of the
-  demonstrations). `rounding="nearest"` (not the paper's) is measured beside it in
-  bench/mpc_speed.py.
+  level above or below it is chosen by the sign of the velocity error of Eq. 6, dv = v*_{t+1} -
+  v_t (`pd_core.discretise.eq5_levels`, the rounding of the demonstrations). v*_{t+1} is the
+  plan's next velocity: "eq5-replan" takes it from the plan just made (so dv is that plan's own
+  first-step change); "eq5" carries the reference from plan to plan (the velocity the plans'
+  continuous thrust would have flown, so dv holds the past quantisation error, as Eq. 6
+  against an open-loop reference does). `mpc_controller` picks per objective (measured there).
+* **Time-to-go.** Every `tf_trial_every` re-plans, a second solve at t_go +- `tf_step_s` lets
+  t_f follow its optimum as the state drifts (a pattern search; the cheaper plan is kept).
+* **No plans through the ground.** Eq. 4 has no altitude constraint (Sec. 2.1) and a fuel
+  optimum may dive below the target and let gravity stop the climb back; fuel plans carry a
+  linearised altitude floor, and any plan more than `underground_m` below the gate is refused.
 * **Fallback (documented safe law).** The fallback controller (the ZEM/ZEV law, whose final
   descent at 0.8 m/s + 0.3 z lands every Table 3 case) flies the rest of the episode once the
   lander is within `terminal_altitude_m` of the gate or `terminal_time_s` of the plan's end, and
   whenever the OCP has no solution: a failed cold solve, or a warm re-plan infeasible at the
-  time-to-go and at `extra_time_s` more (a state that drifted from a plan at its limit). So the
-  teacher never fails for want of a plan, and never pays a cold solve mid-flight.
+  time-to-go with the margin, then with the full limits, then with more time (`recovery`). So
+  the teacher never fails for want of a plan, and never pays a cold solve mid-flight.
 
 Plans are matched to states, not to row numbers: `pd_core.evaluate.rollout` passes only the
 landers still flying, so rows shift as episodes end. Each plan remembers the state it predicts
@@ -79,8 +86,8 @@ class MPCParams:
     gate_altitude_m: float = 2.0
     terminal_time_s: float = 1.0  # below this time-to-go the fallback law lands
     terminal_altitude_m: float = 0.5  # ... or below this height above the gate
-    # "eq5": Eq. 5 against the plan's next state (the demonstrations' rounding); "nearest":
-    # the nearest level (not the paper's; measured beside it in bench/mpc_speed.py)
+    # "eq5" (reference carried), "eq5-replan" (reference reset each step) or "nearest" (the
+    # nearest level, not the paper's; measured beside them in bench/mpc_speed.py)
     rounding: str = "eq5"
     reference_clip_mps: float = 1.0  # |v* - v| carried into Eq. 6 at most (anti-windup)
     floor_every: int = 10  # fuel plans keep z >= gate at every 10th step (and the last 10)
