@@ -309,7 +309,11 @@ class Trainer:
     def _pretrain(self, logs: RunLogs, bar: Any) -> None:
         """DQfD pre-training: gradient updates on demonstrations only, before any interaction."""
         nan = float("nan")
-        while self.demo is not None and self.pretrained < self.cfg.pretrain_updates:
+        while (
+            self.demo is not None
+            and self.pretrained < self.cfg.pretrain_updates
+            and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
+        ):
             self.last_info = self.agent.update(self.sample(pretraining=True))
             self.pretrained += 1
             if self.pretrained % PRETRAIN_LOG_EVERY:
