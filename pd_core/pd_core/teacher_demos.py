@@ -1,8 +1,8 @@
 """Demonstrations from the closed-loop optimal-control teacher (issue 10): episodes and labels.
 
-* `mpc_demonstrations`: episodes flown by the receding-horizon teacher (`pd_core.mpc`) in the
-  disturbed environment (and any dispersions), as 1-step transitions in the format of
-  `pd_core.dqn.train.controller_demos`.
+* `controller_demonstrations` (`mpc_demonstrations` for the teacher): episodes flown by the
+  receding-horizon teacher (`pd_core.mpc`) or another controller in the disturbed environment
+  (and any dispersions), as 1-step transitions for `pd_core.dqn.demonstrations`.
 * `dagger_labels`: the OCP's discretised first action from each given state (DAgger-style expert
   labels on states the agent itself visits).
 
@@ -26,7 +26,7 @@ from pd_core import ocp
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST
 from pd_core.controllers import ZemZevController, make_controller
-from pd_core.evaluate import rollout
+from pd_core.evaluate import Rollouts, rollout
 
 DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balance 2 workers)
 LABEL_CHUNK_STATES = 20
@@ -42,23 +42,9 @@ def _map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | N
         return list(pool.map(fn, *zip(*tasks, strict=True)))
 
 
-def _fly_chunk(
-    objective: str,
-    n: int,
-    seed: int,
-    first_episode: int,
-    dispersions: Any,
-    initial_states: np.ndarray | None,
-) -> dict[str, np.ndarray]:
-    """Transitions of episodes first_episode .. + n - 1 (env seeds seed ..) of a fresh teacher."""
-    ro = rollout(
-        make_controller(f"mpc-{objective}"),
-        n,
-        seed,
-        keep_trajectories=n,
-        initial_states=initial_states,
-        dispersions=dispersions,
-    )
+def rollout_steps(ro: Rollouts, first_episode: int = 0) -> dict[str, np.ndarray]:
+    """1-step transitions of every kept trajectory of `ro` (true states; episode ids from
+    `first_episode`): states, actions, next_states, dones, episode, and landed per episode."""
     s, a, nx, d, ep = [], [], [], [], []
     for i, (path, acts) in enumerate(zip(ro.trajectories, ro.actions, strict=True)):
         t = len(acts)
@@ -79,29 +65,50 @@ def _fly_chunk(
     }
 
 
-def mpc_demonstrations(
+def _fly_chunk(
+    controller: str,
+    n: int,
+    seed: int,
+    first_episode: int,
+    dispersions: Any,
+    initial_states: np.ndarray | None,
+) -> dict[str, np.ndarray]:
+    """Transitions of episodes first_episode .. + n - 1 (env seeds seed ..) of a fresh
+    controller."""
+    ro = rollout(
+        make_controller(controller),
+        n,
+        seed,
+        keep_trajectories=n,
+        initial_states=initial_states,
+        dispersions=dispersions,
+    )
+    return rollout_steps(ro, first_episode)
+
+
+def controller_demonstrations(
+    controller: str,
     n_episodes: int,
     seed: int,
-    objective: str = "fuel",
     *,
     dispersions: Any = "",
     initial_states: np.ndarray | None = None,
     workers: int | None = None,
     chunk: int = DEMO_CHUNK_EPISODES,
 ) -> dict[str, np.ndarray]:
-    """Physical 1-step transitions of the MPC teacher flying episodes 0..n_episodes-1 (episode
-    i: env seed seed + i, disturbances on; initial state sampled from Table 3 or row i of
-    `initial_states`): states, actions, next_states, dones, episode and success_rate, as
-    `controller_demos`. `dispersions` as `pd_core.evaluate.rollout`; `workers` None = every
-    core."""
+    """Physical 1-step transitions of a controller of `pd_core.controllers` (the MPC teacher
+    `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
+    seed + i, disturbances on; initial state sampled from Table 3 or row i of `initial_states`):
+    states, actions, next_states, dones, episode, landed (per episode) and success_rate.
+    `dispersions` as
+    `pd_core.evaluate.rollout`; `workers` None = every core."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
-    if objective not in ocp.OBJECTIVES:
-        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
+    make_controller(controller)  # an unknown name fails here, in the caller's process
     init = None if initial_states is None else np.asarray(initial_states, dtype=float)
     tasks = [
         (
-            objective,
+            controller,
             min(chunk, n_episodes - k),
             seed + k,
             k,
@@ -111,9 +118,18 @@ def mpc_demonstrations(
         for k in range(0, n_episodes, chunk)
     ]
     parts = _map_chunks(_fly_chunk, tasks, workers)
-    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "landed"}
-    out["success_rate"] = np.array(float(np.mean(np.concatenate([p["landed"] for p in parts]))))
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    out["success_rate"] = np.array(float(np.mean(out["landed"])))
     return out
+
+
+def mpc_demonstrations(
+    n_episodes: int, seed: int, objective: str = "fuel", **kw: Any
+) -> dict[str, np.ndarray]:
+    """`controller_demonstrations` of the MPC teacher with this objective (Eq. 4 or fuel)."""
+    if objective not in ocp.OBJECTIVES:
+        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
+    return controller_demonstrations(f"mpc-{objective}", n_episodes, seed, **kw)
 
 
 def ocp_first_action(state: np.ndarray, objective: str) -> int | None:

@@ -10,13 +10,12 @@ import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RewardConfig
-from pd_core.controllers import make_controller
 from pd_core.demos import load_demos
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
-from pd_core.evaluate import rollout
 from pd_core.reward import reward as shaped_reward
 from pd_core.state import scale_state
+from pd_core.teacher_demos import controller_demonstrations
 
 CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
@@ -65,21 +64,19 @@ def demo_transitions(
     )
 
 
-def controller_steps(name: str, n_episodes: int, seed: int) -> tuple[PhysicalSteps, float]:
-    """1-step transitions of a reference controller flying the disturbed env; its success rate."""
-    ro = rollout(make_controller(name), n_episodes, seed, keep_trajectories=n_episodes)
-    s, a, nx, d, ep = [], [], [], [], []
-    for i, (path, acts) in enumerate(zip(ro.trajectories, ro.actions, strict=True)):
-        t = len(acts)
-        s.append(path[:-1])
-        nx.append(path[1:])
-        a.append(acts)
-        done = np.zeros(t, dtype=bool)
-        done[-1] = bool(ro.terminated[i])
-        d.append(done)
-        ep.append(np.full(t, i))
-    steps = PhysicalSteps(*(np.concatenate(x) for x in (s, a, nx, d, ep)))
-    return steps, float(np.mean(ro.landed))
+def controller_steps(
+    name: str, n_episodes: int, seed: int, dispersions: str = "", landed_only: bool = False
+) -> tuple[PhysicalSteps, float]:
+    """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
+    env under `dispersions`, of every episode or only of those that landed; its success rate.
+    The MPC teacher flies on every core."""
+    workers = None if name.startswith("mpc") else 1
+    d = controller_demonstrations(name, n_episodes, seed, dispersions=dispersions, workers=workers)
+    keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
+    steps = PhysicalSteps(
+        *(d[k][keep] for k in ("states", "actions", "next_states", "dones", "episode"))
+    )
+    return steps, float(d["success_rate"])
 
 
 def file_steps(path: Path) -> PhysicalSteps:
@@ -103,17 +100,26 @@ def build_demo_memory(
         steps = file_steps(Path(cfg.demos))
         parts.append(demo_transitions(steps, cfg, reward_cfg))
         info["file"] = {"path": str(Path(cfg.demos)), "transitions": len(steps.actions)}
-    if cfg.batch_demo > 0 and cfg.controller_demo_episodes > 0:
-        steps, success = controller_steps(
-            cfg.controller, cfg.controller_demo_episodes, cfg.seed + CONTROLLER_SEED_OFFSET
-        )
-        parts.append(demo_transitions(steps, cfg, reward_cfg))
-        info["controller"] = {
-            "name": cfg.controller,
-            "episodes": cfg.controller_demo_episodes,
-            "transitions": len(steps.actions),
-            "success_rate": success,
-        }
+    names = [n.strip() for n in cfg.controller.split(",") if n.strip()]
+    if cfg.batch_demo > 0 and cfg.controller_demo_episodes > 0 and names:
+        info["controller"] = []
+        for k, name in enumerate(names):  # the episodes are split evenly between the teachers
+            n = cfg.controller_demo_episodes // len(names) + (
+                k < cfg.controller_demo_episodes % len(names)
+            )
+            seed = cfg.seed + CONTROLLER_SEED_OFFSET + k * 1_000_000
+            steps, success = controller_steps(name, n, seed, cfg.dispersions, cfg.demo_landed_only)
+            parts.append(demo_transitions(steps, cfg, reward_cfg))
+            info["controller"].append(
+                {
+                    "name": name,
+                    "episodes": n,
+                    "transitions": len(steps.actions),
+                    "success_rate": success,
+                    "landed_only": cfg.demo_landed_only,
+                    "dispersions": cfg.dispersions or "nominal",
+                }
+            )
     if not parts:
         return None, info
     return DemoMemory.fill(*(np.concatenate(col) for col in zip(*parts, strict=True))), info

@@ -1,0 +1,41 @@
+"""Controller demonstrations for the DQfD memory: flown under the training dispersions, split
+between teachers, and filtered to the episodes that landed."""
+
+import numpy as np
+
+from pd_core.dqn.config import preset
+from pd_core.dqn.demonstrations import build_demo_memory, controller_steps
+from pd_core.dqn.train import training_reward
+from pd_core.teacher_demos import controller_demonstrations
+
+
+def test_controller_demonstrations_fly_the_dispersed_masses() -> None:
+    d = controller_demonstrations("zemzev", 12, 5, dispersions="mass", workers=1)
+    first = np.flatnonzero(np.r_[True, d["episode"][1:] != d["episode"][:-1]])
+    m0 = d["states"][first, 6]
+    assert len(m0) == 12
+    assert np.all((m0 >= 1800.0) & (m0 <= 2200.0))
+    assert np.ptp(m0) > 100.0  # Table 3 alone would give 2000 kg every time
+    assert d["landed"].shape == (12,)
+    assert float(d["success_rate"]) == d["landed"].mean()
+
+
+def test_landed_only_keeps_exactly_the_landed_episodes() -> None:
+    every, rate = controller_steps("zemzev", 24, 7, "all")
+    kept, rate_kept = controller_steps("zemzev", 24, 7, "all", landed_only=True)
+    assert rate == rate_kept < 1.0  # the `all` scenario makes ZEM/ZEV fail some episodes
+    landed = controller_demonstrations("zemzev", 24, 7, dispersions="all", workers=1)["landed"]
+    assert set(np.unique(kept.episode)) == set(np.flatnonzero(landed))
+    mask = landed[every.episode]
+    np.testing.assert_array_equal(kept.actions, every.actions[mask])
+    np.testing.assert_array_equal(kept.states, every.states[mask])
+
+
+def test_demo_memory_splits_episodes_between_teachers() -> None:
+    cfg = preset(
+        "best", controller="zemzev, zemzev", controller_demo_episodes=5, dispersions="gusts"
+    )
+    memory, info = build_demo_memory(cfg, training_reward(cfg))
+    assert [c["episodes"] for c in info["controller"]] == [3, 2]
+    assert all(c["dispersions"] == "gusts" for c in info["controller"])
+    assert len(memory) == sum(c["transitions"] for c in info["controller"])
