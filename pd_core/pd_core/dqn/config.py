@@ -1,7 +1,8 @@
 """Training configuration: one dataclass, a docstring per field, turned into `pd-train` flags.
 
-Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200)
-and `best` (what won our comparisons; see models/<name>.md). Flags given on the command line
+Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200),
+`best` (what won our comparisons on the nominal problem) and `robust` (issue 10: trained under
+dispersions from the closed-loop OCP teacher; see models/<name>.md). Flags given on the command line
 override the preset.
 """
 
@@ -20,7 +21,7 @@ from pd_core.config import DQN_PAPER
 @dataclass
 class TrainConfig:
     preset: str = "paper-agent1"
-    """preset the other fields start from: paper-agent1, paper-agent2 or best"""
+    """preset the other fields start from: paper-agent1, paper-agent2, best or robust"""
     seed: int = 1
     """seed of torch, numpy and the envs: the same seed gives the same weights on CPU"""
     episodes: int = DQN_PAPER.episodes
@@ -81,12 +82,17 @@ class TrainConfig:
     controller_demo_episodes: int = 0
     """episodes flown by the reference controller (pd_core.controllers) added as demonstrations"""
     controller: str = "zemzev"
-    """reference controller used for controller demonstrations"""
+    """controller(s) flying the controller demonstrations, under `dispersions`: zemzev, the MPC
+    teacher mpc-fuel / mpc-energy (flown on every core), or a comma list sharing the episodes"""
+    demo_landed_only: bool = False
+    """keep only the controller demonstrations of episodes that landed (a teacher that fails
+    under a dispersion would otherwise be imitated into the crash by the margin loss)"""
     pretrain_updates: int = 0
     """gradient updates on demonstrations only before interaction starts (DQfD pre-training)"""
     dispersions: str = ""
-    """dispersions the training envs sample (domain randomisation): a scenario or campaign name
-    or a YAML file of pd_core.dispersions ("": nominal, the paper)"""
+    """dispersions the training envs, the controller demonstrations and the periodic evaluations
+    sample (domain randomisation): a scenario or campaign name or a YAML file of
+    pd_core.dispersions ("": nominal, the paper)"""
     fuel_weight: float = 1.0
     """multiplies beta (control effort) of the training reward; evaluation is unaffected"""
     eval_every_s: float = 60.0
@@ -145,6 +151,18 @@ PRESETS: dict[str, dict[str, Any]] = {
         "eval_every_s": 150.0,
         "eval_episodes": 300,
     },
+}
+# Ours for issue 10: `best` under domain randomisation over the whole `standard` campaign, from
+# demonstrations of the closed-loop OCP teacher (MPC, fuel objective) and ZEM/ZEV flown under the
+# same dispersions, keeping the episodes that landed; periodic evaluations fly the same campaign.
+PRESETS["robust"] = {
+    **PRESETS["best"],
+    "dispersions": "standard",
+    "controller": "mpc-fuel,zemzev",
+    "controller_demo_episodes": 1000,
+    "demo_landed_only": True,
+    "max_minutes": 45.0,
+    "eval_episodes": 500,
 }
 
 

@@ -145,7 +145,7 @@ class Trainer:
         if self.demo is not None and len(self.demo) > 0:
             return self.demo.obs[: len(self.demo)]
         ro = rollout(
-            make_controller(self.cfg.controller),
+            make_controller(self.cfg.controller.split(",")[0].strip()),
             50,
             self.cfg.seed + 60_000_000,
             keep_trajectories=50,
@@ -213,6 +213,7 @@ class Trainer:
             NetActor(self.agent.q),
             episodes or self.cfg.eval_episodes,
             self.cfg.eval_seed if seed is None else seed,
+            dispersions=self.cfg.dispersions,
         )
         s = summarise(ro)
         t = s["table7"]
