@@ -28,7 +28,7 @@ from pd_core.ocp.model import (
     SolverOutput,
     SolveTimeout,
 )
-from pd_core.ocp.qp import INFEASIBLE, TfEval, WarmStart, cold_start
+from pd_core.ocp.qp import INFEASIBLE, TfEval, WarmStart, free_final_time
 
 # SLP: the thrust is split T = T+ - T- (T+, T- >= 0) and the terminal state is linearised in
 # each with its one-sided exact Jacobian (sign +1 for T+, -1 for T-), so switching on a thrust
@@ -261,22 +261,12 @@ def solve_fuel(
     tf_tol_s: float = 2e-3,
 ) -> SolverOutput:
     """Free-final-time fuel optimum: `tf_brent` over `fuel_lp_at`, then `fuel_slp` at t_f."""
-    st, tf0 = cold_start(pb)
-
-    def f(t_f: float, n_pass: int = passes) -> TfEval:
-        if time.perf_counter() > deadline:
-            raise SolveTimeout
-        return fuel_lp_at(t_f, pb, st, n_pass)
-
-    try:
-        t_f = tf_brent(f, tf0, tf_tol_s * 5)
-        p = None if t_f is None else f(t_f, final_passes)[2]
-        if p is not None and t_f is not None:
-            p = fuel_slp(pb, p, pb.grid(t_f), deadline=deadline)
-    except SolveTimeout:
-        return SolverOutput(st.p, tf0, st.evals, "timed out", False)
-    if t_f is None or p is None:
-        return SolverOutput(
-            st.p, tf0, st.evals, "no feasible thrust schedule in the searched t_f range", False
-        )
-    return SolverOutput(p, t_f, st.evals, "converged", True)
+    return free_final_time(
+        pb,
+        fuel_lp_at,
+        lambda f, tf0: tf_brent(f, tf0, tf_tol_s * 5),
+        deadline,
+        passes,
+        final_passes,
+        polish=lambda p, t_f: fuel_slp(pb, p, pb.grid(t_f), deadline=deadline),
+    )

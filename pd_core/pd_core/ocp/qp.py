@@ -228,6 +228,39 @@ def tf_root(f: Callable[[float], TfEval], tf0: float, tol_s: float) -> float | N
     return 0.5 * (a + b) if abs(b - a) <= tol_s else b
 
 
+def free_final_time(
+    pb: Problem,
+    at: Callable[[float, Problem, WarmStart, int], TfEval],
+    search: Callable[[Callable[[float], TfEval], float], float | None],
+    deadline: float,
+    passes: int,
+    final_passes: int,
+    polish: Callable[[np.ndarray, float], np.ndarray | None] | None = None,
+) -> SolverOutput:
+    """The free-final-time driver both objectives share: a cold start, a 1-D `search` over t_f of
+    the fixed-t_f solve `at` (warm-started, `passes` passes), `final_passes` at the t_f found,
+    then an optional `polish(p, t_f)`. Checks the deadline before every fixed-t_f solve."""
+    st, tf0 = cold_start(pb)
+
+    def f(t_f: float, n_pass: int = passes) -> TfEval:
+        if time.perf_counter() > deadline:
+            raise SolveTimeout
+        return at(t_f, pb, st, n_pass)
+
+    try:
+        t_f = search(f, tf0)
+        p = None if t_f is None else f(t_f, final_passes)[2]
+        if p is not None and t_f is not None and polish is not None:
+            p = polish(p, t_f)
+    except SolveTimeout:
+        return SolverOutput(st.p, tf0, st.evals, "timed out", False)
+    if t_f is None or p is None:
+        return SolverOutput(
+            st.p, tf0, st.evals, "no feasible thrust schedule in the searched t_f range", False
+        )
+    return SolverOutput(p, t_f, st.evals, "converged", True)
+
+
 def solve_energy(
     pb: Problem,
     deadline: float = math.inf,
@@ -236,20 +269,11 @@ def solve_energy(
     tf_tol_s: float = 2e-3,
 ) -> SolverOutput:
     """Free-final-time energy optimum: `tf_root` over `energy_at`, then `final_passes` at t_f."""
-    st, tf0 = cold_start(pb)
-
-    def f(t_f: float, n_pass: int = passes) -> TfEval:
-        if time.perf_counter() > deadline:
-            raise SolveTimeout
-        return energy_at(t_f, pb, st, n_pass)
-
-    try:
-        t_f = tf_root(f, tf0, tf_tol_s)
-        p = None if t_f is None else f(t_f, final_passes)[2]
-    except SolveTimeout:
-        return SolverOutput(st.p, tf0, st.evals, "timed out", False)
-    if t_f is None or p is None:
-        return SolverOutput(
-            st.p, tf0, st.evals, "no feasible thrust schedule in the searched t_f range", False
-        )
-    return SolverOutput(p, t_f, st.evals, "converged", True)
+    return free_final_time(
+        pb,
+        energy_at,
+        lambda f, tf0: tf_root(f, tf0, tf_tol_s),
+        deadline,
+        passes,
+        final_passes,
+    )
