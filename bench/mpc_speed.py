@@ -12,6 +12,10 @@ CPU time does not.
 Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="highs") against
 highspy directly (no presolve), on the same LPs.
 
+Part 3 (`--demos N`): wall time of N teacher demonstration episodes
+(`pd_core.teacher_demos.controller_demonstrations`, mpc-fuel, every core, under `--dispersions`)
+and the time it implies for 1000 (issue 10 asks <= 10 min on this 2-core machine).
+
 Single-threaded BLAS (set below before numpy loads), as bench/ocp_speed.py.
 """
 
@@ -34,6 +38,7 @@ from pd_core.evaluate import rollout  # noqa: E402
 from pd_core.mpc import MPCController, MPCParams  # noqa: E402
 from pd_core.ocp.fuel import fuel_weights, new_highs, solve_lp  # noqa: E402
 from pd_core.ocp.model import KN  # noqa: E402
+from pd_core.teacher_demos import controller_demonstrations  # noqa: E402
 
 
 def _ms(v: list[float], q: float) -> float:
@@ -128,7 +133,24 @@ def main(argv: list[str] | None = None) -> int:
         help="registered names, or mpc-fuel-nearest / mpc-energy-nearest",
     )
     ap.add_argument("--lp", action="store_true", help="also compare scipy linprog and highspy")
+    ap.add_argument("--demos", type=int, default=0, metavar="N", help="time N demo episodes")
+    ap.add_argument("--dispersions", default="standard", help="dispersions of the demo episodes")
+    ap.add_argument("--only-demos", action="store_true", help="skip parts 1 and 2")
     args = ap.parse_args(argv)
+    if args.demos > 0:
+        t0 = time.perf_counter()
+        d = controller_demonstrations(
+            "mpc-fuel", args.demos, args.seed, dispersions=args.dispersions
+        )
+        wall = time.perf_counter() - t0
+        print(
+            f"{args.demos} mpc-fuel demonstration episodes ({args.dispersions}, {os.cpu_count()} "
+            f"workers): {wall:.0f} s wall, {len(d['actions'])} transitions, success "
+            f"{100 * float(d['success_rate']):.1f} %; 1000 episodes -> "
+            f"{1000 * wall / args.demos / 60:.1f} min"
+        )
+        if args.only_demos:
+            return 0
     fuel_opt, opt_wall, opt_cpu = fuel_optimal(args.episodes, args.seed, args.fuel_subset)
     print(
         f"{args.episodes} nominal Table 3 episodes (disturbances on, seed {args.seed}); fuel "
