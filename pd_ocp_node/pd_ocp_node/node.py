@@ -30,8 +30,6 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
-from pd_ros_common.convert import fill_ocp_response, from_vec3, vec3
-from pd_ros_common.run import run_node
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
@@ -40,6 +38,8 @@ from pd_core.config import OCP_CONTROL_POINTS
 from pd_core.discretise import discretise
 from pd_interfaces.srv import ComputeTrajectory
 from pd_ros_common import names, params, qos
+from pd_ros_common.convert import fill_ocp_response, from_vec3, vec3
+from pd_ros_common.run import run_node
 
 NODE_NAME = "pd_ocp_node"
 
@@ -172,9 +172,15 @@ class OcpNode(Node):
         objective = request.objective or self._param("objective")
         n_control = int(request.control_points) or self._param("control_points")
         timeout = float(request.timeout) or self._param("timeout_s")
-        why = ocp.check_request(position, velocity, request.mass)
-        if why is None and not (math.isfinite(timeout) and timeout > 0):
-            why = f"timeout must be > 0 s, got {timeout!r}"
+        why = ocp.check_request(
+            position,
+            velocity,
+            request.mass,
+            method=method,
+            objective=objective,
+            n_control=n_control,
+            timeout_s=timeout,
+        )
         if why is not None:  # refuse at once, without queueing behind a running solve
             response.success = False
             response.message = f"bad request: {why}"

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Vector3
 from helpers import ProcessSet
-from pd_ros_common.convert import ocp_request
-from pd_ros_common.qos import SERVICE_QOS
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.parameter import Parameter
 
 from pd_core.config import PAPER_TABLE4, TABLE1
 from pd_interfaces.srv import ComputeTrajectory
+from pd_ros_common.convert import ocp_request
+from pd_ros_common.qos import SERVICE_QOS
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -107,7 +107,8 @@ def _with(**changes):
         (GOOD, {"method": "magic"}, "unknown method"),
         (GOOD, {"objective": "speed"}, "unknown objective"),
         (GOOD, {"timeout": -1.0}, "timeout"),
-        (GOOD, {"timeout": 1e-9}, "too short to start a solve"),  # no earlier solve to blame
+        (GOOD, {"timeout": 1e-9}, "timeout_s must be in [0.01, 3600] s"),
+        (GOOD, {"control_points": 100_000}, "control points) must be an integer in [2, 500]"),
     ],
 )
 def test_bad_requests_get_success_false(client, state, fields, says):
