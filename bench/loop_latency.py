@@ -26,10 +26,6 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from pd_ros_common.convert import state_msg
-from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.process import ProcessError, Supervisor
-from pd_ros_common.qos import LOOP_PUB_QOS, LOOP_SUB_QOS
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -38,6 +34,10 @@ from pd_core.sim import Command, Simulator, percentiles_ms
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_policy_node.node import default_model_path
 from pd_ros_common import names
+from pd_ros_common.convert import state_msg
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.process import ProcessError, Supervisor
+from pd_ros_common.qos import LOOP_PUB_QOS, LOOP_SUB_QOS
 
 
 def parse_args() -> argparse.Namespace:

@@ -23,10 +23,6 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from pd_ros_common.convert import reset_request
-from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.gaps import SequenceGaps
-from pd_ros_common.process import Supervisor, executable
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -36,6 +32,10 @@ from pd_bringup.bag import read_bag
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import names, qos
+from pd_ros_common.convert import reset_request
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.gaps import SequenceGaps
+from pd_ros_common.process import Supervisor, executable
 
 KEEP_ALL = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,

@@ -21,14 +21,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pd_ros_common.convert import final_state
-from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.process import ProcessError, Supervisor, executable
 
 from pd_bringup.bag import read_bag
 from pd_bringup.flight import FlightClient, FlightError
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
 from pd_core.plots import flight_vs_ocp
+from pd_ros_common.convert import final_state
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.process import ProcessError, Supervisor, executable
 
 START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
 

@@ -12,6 +12,13 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
+from pd_ros_common import names, qos
 from pd_ros_common.convert import (
     from_vec3,
     ocp_request,
@@ -20,13 +27,6 @@ from pd_ros_common.convert import (
     state_from_msg,
     state_vector,
 )
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-
-from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
-from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
-from pd_ros_common import names, qos
 
 
 class FlightError(RuntimeError):

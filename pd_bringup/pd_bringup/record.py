@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from pd_ros_common.gaps import SequenceGaps
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -41,6 +40,7 @@ from rosbags.interfaces import Qos
 from pd_bringup.bag import bag_qos, flush_writer, message_class, open_writer, type_name, typestore
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_ros_common import names, qos
+from pd_ros_common.gaps import SequenceGaps
 
 KNOWN_TYPES: dict[str, type] = {
     names.STATE_TOPIC: LanderState,

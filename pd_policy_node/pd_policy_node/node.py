@@ -23,8 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pd_ros_common.convert import command_msg, state_from_msg
-from pd_ros_common.run import run_node
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
@@ -34,6 +32,8 @@ from pd_core.policy import PolicyLoadError
 from pd_core.state import check_state
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_ros_common import names, params, qos
+from pd_ros_common.convert import command_msg, state_from_msg
+from pd_ros_common.run import run_node
 
 NODE_NAME = "pd_policy_node"
 MODEL_ENV = "PD_MODEL_PATH"

@@ -27,9 +27,6 @@ import time
 from typing import Any
 
 import numpy as np
-from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
-from pd_ros_common.gaps import SequenceGaps
-from pd_ros_common.run import run_node
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
@@ -38,6 +35,9 @@ from pd_core.sim import MISSING_COMMAND_MODES, FixedRateTicker, Simulator, perce
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import names, params, qos
+from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
+from pd_ros_common.gaps import SequenceGaps
+from pd_ros_common.run import run_node
 
 NODE_NAME = "pd_sim_node"
 

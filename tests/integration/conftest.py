@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable, Iterator
 
 import pytest
+
 from pd_ros_common.domain import claim_domain_id
 
 ROS_DOMAIN_ID, _domain_lock_fd = claim_domain_id("PD_TEST_ROS_DOMAIN_ID")

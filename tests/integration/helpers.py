@@ -12,11 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from pd_core.config import TABLE3
 from pd_ros_common.process import Child as NodeProcess
 from pd_ros_common.process import Supervisor as ProcessSet
 from pd_ros_common.process import executable, ros_args, wait_for
-
-from pd_core.config import TABLE3
 
 __all__ = [
     "NodeProcess",

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import ProcessSet
-from pd_ros_common.convert import final_state, reset_request
 
 from pd_core.controllers import CONTROLLERS, make_controller
 from pd_core.env import PoweredDescentEnv
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import qos
+from pd_ros_common.convert import final_state, reset_request
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 

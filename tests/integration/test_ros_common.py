@@ -5,10 +5,10 @@ from __future__ import annotations
 import os
 
 import pytest
-from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.gaps import SequenceGaps
 
 from pd_ros_common import names, params
+from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.gaps import SequenceGaps
 
 pytestmark = [pytest.mark.integration]
 

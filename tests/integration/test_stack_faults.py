@@ -22,7 +22,6 @@ import numpy as np
 import pytest
 import yaml
 from helpers import ProcessSet, executable, wait_for
-from pd_ros_common.convert import reset_request, vec3
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -30,6 +29,7 @@ from pd_bringup.bag import read_bag, typestore
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import qos
+from pd_ros_common.convert import reset_request, vec3
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 

@@ -16,10 +16,10 @@ import signal
 
 import pytest
 from helpers import ProcessSet
-from pd_ros_common.convert import vec3
 
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_ros_common import qos
+from pd_ros_common.convert import vec3
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
 
