@@ -4,12 +4,17 @@ A campaign is (agents) x (scenarios) x (episodes 0..N-1, episode i on env seed s
 into shards along the episode index on multiples of `CHUNK_EPISODES` (each chunk is flown as one
 batch), so any split into shards, in one process or as Ray tasks (`pd_core.ray_campaign`),
 gives exactly the unsharded numbers. Nothing here imports torch (a policy file loads it) or Ray.
+
+With `reachability`, the episodes some agent failed are judged by `pd_core.reachability`, and the
+table adds per scenario the episodes proven out of reach and per agent the success rate over the
+others (issue 10: a scenario's 99 % target excludes only what no thrust schedule can land).
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +34,7 @@ from pd_core.evaluate import (
     rollout,
 )
 from pd_core.policy import load_policy
+from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -40,6 +46,7 @@ METRICS = (
     ("k_velocity_worst_mps", "worst vk m/s", 1.0, ".2f"),
     ("fuel_median_kg", "fuel p50 kg", 1.0, ".1f"),
 )
+REACH_HEAD = ("out of reach", "success % of reachable")
 
 
 def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
@@ -166,31 +173,76 @@ def _bar(total: int, enabled: bool) -> Any:
     return tqdm(total=total, unit="ep", disable=not enabled, smoothing=0.1)
 
 
+def reachability(
+    flown: dict[str, dict[str, Rollouts]],
+    scenarios: list[Dispersions],
+    seed: int,
+    progress: bool = False,
+) -> dict[str, ScenarioReach]:
+    """{scenario: verdicts on the episodes some agent failed} (`pd_core.reachability`)."""
+    bar = _bar(sum(len(failed_episodes(flown[d.name])) for d in scenarios), progress)
+    out = campaign_reachability(flown, scenarios, seed, on_episode=lambda: bar.update(1))
+    bar.close()
+    return out
+
+
 def table(
     flown: dict[str, dict[str, Rollouts]],
     scenarios: list[Dispersions],
     agents: list[str],
     seed: int,
     episodes: int,
+    reach: Mapping[str, ScenarioReach] | None = None,
 ) -> dict[str, Any]:
-    """The campaign as JSON-ready data: scenarios, agents and a metrics cell for each pair."""
-    return {
+    """The campaign as JSON-ready data: scenarios, agents and a metrics cell for each pair;
+    with `reach`, also `reachability` per scenario and the success over reachable episodes."""
+    results = {d.name: {a: metrics(flown[d.name][a]) for a in agents} for d in scenarios}
+    t = {
         "seed": seed,
         "episodes": episodes,
         "agents": list(agents),
         "scenarios": [d.to_dict() for d in scenarios],
-        "results": {d.name: {a: metrics(flown[d.name][a]) for a in agents} for d in scenarios},
+        "results": results,
         "mean_success_rate": {
-            a: float(np.mean([metrics(flown[d.name][a])["success_rate"] for d in scenarios]))
+            a: float(np.mean([results[d.name][a]["success_rate"] for d in scenarios]))
             for a in agents
         },
     }
+    if reach is None:
+        return t
+    t["reachability"] = {}
+    for d in scenarios:
+        r = reach[d.name]
+        ok = np.ones(len(next(iter(flown[d.name].values())).landed), dtype=bool)
+        ok[r.out_of_reach] = False
+        for a in agents:
+            landed = flown[d.name][a].landed[ok]
+            results[d.name][a]["episodes_reachable"] = int(ok.sum())
+            results[d.name][a]["success_rate_reachable"] = (
+                float(np.mean(landed)) if len(landed) else None
+            )
+        t["reachability"][d.name] = {
+            "checked_episodes": len(r.checked),
+            "out_of_reach": len(r.out_of_reach),
+            "out_of_reach_episodes": r.out_of_reach,
+            "undecided_episodes": r.undecided,
+            "plans": dict(Counter(v.plan or v.status for v in r.verdicts.values())),
+            "evidence": {str(i): r.verdicts[i].to_dict() for i in r.out_of_reach + r.undecided},
+        }
+    t["mean_success_rate_reachable"] = {
+        a: _mean_of_some([results[d.name][a]["success_rate_reachable"] for d in scenarios])
+        for a in agents
+    }
+    return t
 
 
 def format_table(t: dict[str, Any]) -> str:
-    """Scenario x agent text table."""
+    """Scenario x agent text table (with the reachability columns when the table has them)."""
     width = 14
+    reach = t.get("reachability")
     head = f"{'scenario':<14}{'agent':<18}" + "".join(f"{m[1]:>{width}}" for m in METRICS)
+    if reach is not None:
+        head += f"{REACH_HEAD[0]:>{width}}{REACH_HEAD[1]:>24}"
     lines = [
         f"pd-eval campaign: {t['episodes']} episodes per scenario and agent, seed {t['seed']} "
         "(episode i on seed + i)",
@@ -202,11 +254,38 @@ def format_table(t: dict[str, Any]) -> str:
         for a in t["agents"]:
             cell = t["results"][d["name"]][a]
             vals = "".join(f"{cell[k] * s:>{width}{fmt}}" for k, _, s, fmt in METRICS)
+            if reach is not None:
+                rate = cell["success_rate_reachable"]
+                vals += f"{reach[d['name']]['out_of_reach']:>{width}d}"
+                vals += f"{'-' if rate is None else f'{100 * rate:.1f}':>24}"
             lines.append(f"{d['name']:<14}{a:<18}{vals}")
     lines.append("")
     for a, v in t["mean_success_rate"].items():
         lines.append(f"mean success over the campaign, {a}: {100 * v:.2f} %")
+    if reach is not None:
+        for a, v in t["mean_success_rate_reachable"].items():
+            rate = "-" if v is None else f"{100 * v:.2f} %"
+            lines.append(f"mean success over the reachable episodes, {a}: {rate}")
+        lines += ["", "reachability of the episodes some agent failed (pd_core.reachability):"]
+        for name, r in reach.items():
+            lines.append(
+                f"  {name}: {r['checked_episodes']} judged, {r['out_of_reach']} out of reach "
+                f"{_some(r['out_of_reach_episodes'])}, {len(r['undecided_episodes'])} undecided "
+                f"{_some(r['undecided_episodes'])}"
+            )
     return "\n".join(lines)
+
+
+def _mean_of_some(values: list[float | None]) -> float | None:
+    """Mean of the values that are not None (None if all are)."""
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else None
+
+
+def _some(idx: list[int], n: int = 12) -> str:
+    """[i, j, ...] of at most n episode indices."""
+    more = f", ... ({len(idx) - n} more)" if len(idx) > n else ""
+    return "[" + ", ".join(map(str, idx[:n])) + more + "]"
 
 
 def write_json(t: dict[str, Any], path: str | Path) -> Path:
@@ -226,6 +305,7 @@ __all__ = [
     "merge",
     "metrics",
     "plan",
+    "reachability",
     "run_campaign",
     "table",
     "write_json",

@@ -7,6 +7,7 @@ Examples:
     pd-eval models/pd_dqn_best.pt --compare runs/paper-agent2__1__*/final.pt \\
         --training-log runs/best__1__*/episodes.csv --figures out/figs
     pd-eval models/pd_dqn_best.pt --dispersions standard --compare zemzev=controller:zemzev
+    pd-eval --controller zemzev --dispersions mass,all --reachability
     pd-eval models/pd_dqn_best.pt --episodes 100000 --ray [--shards 8] [--address auto]
 """
 
@@ -22,7 +23,14 @@ from typing import Any
 import numpy as np
 
 from pd_core import plots
-from pd_core.campaign import format_table, load_actor, run_campaign, table, write_json
+from pd_core.campaign import (
+    format_table,
+    load_actor,
+    reachability,
+    run_campaign,
+    table,
+    write_json,
+)
 from pd_core.config import DT_S
 from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
 from pd_core.evaluate import (
@@ -85,6 +93,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--out", help="folder for campaign.json/.png (default out/campaign-<time>)")
     g.add_argument(
+        "--reachability",
+        action="store_true",
+        help="judge every episode some agent failed with pd_core.reachability (OCP plans and a "
+        "full-thrust braking bound, 0.1-2 s each): the table adds the episodes out of reach per "
+        "scenario and each agent's success %% over the reachable ones",
+    )
+    g.add_argument(
         "--ray", action="store_true", help="fly the episodes as Ray tasks (same numbers)"
     )
     g.add_argument("--shards", type=int, help="Ray shards per scenario and agent (default: auto)")
@@ -110,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.episodes < 1 or args.fuel_optimal < 0 or (args.shards is not None and args.shards < 1):
         print("pd-eval: --episodes and --shards must be >= 1, --fuel-optimal >= 0", file=sys.stderr)
+        return 2
+    if args.reachability and not args.dispersions:
+        print("pd-eval: --reachability judges a campaign: give --dispersions", file=sys.stderr)
         return 2
     spec = args.model or f"controller:{args.controller}"
     try:
@@ -197,7 +215,10 @@ def campaign_main(args: argparse.Namespace, spec: str, name: str) -> int:
         load_actor(other_spec)  # refuse a bad file before flying anything
         agents[other_name] = other_spec
     flown = _fly_campaign(args, agents, scenarios)
-    t = table(flown, scenarios, list(agents), args.seed, args.episodes)
+    reach = None
+    if args.reachability:
+        reach = reachability(flown, scenarios, args.seed, progress=not args.no_progress)
+    t = table(flown, scenarios, list(agents), args.seed, args.episodes, reach)
     out = Path(args.out or f"out/campaign-{time.strftime('%Y%m%d-%H%M%S')}")
     t["files"] = {
         "json": str(out / "campaign.json"),
