@@ -38,7 +38,7 @@ from pd_core.dqn.run_log import RunLogs, run_folder
 from pd_core.env import make_vector_env
 from pd_core.evaluate import rollout, summarise
 from pd_core.plots import training_curves
-from pd_core.policy import code_version, save_policy
+from pd_core.policy import code_version, load_policy, save_policy
 from pd_core.state import scale_state
 
 EvalCallback = Callable[[dict[str, float]], None]
@@ -108,6 +108,8 @@ class Trainer:
             self.demo, self.demo_info = None, {}
         self.run_dir = run_dir or run_folder(cfg)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        if cfg.init_policy and restore is None:
+            self._init_from_policy(cfg.init_policy)
         if cfg.input_norm_init and restore is None:
             self.agent.init_input_normalisation(self._normalisation_states())
         self.env = make_vector_env(
@@ -138,6 +140,18 @@ class Trainer:
         d["hidden"] = tuple(d["hidden"])
         d.update(overrides or {})
         return cls(TrainConfig(**d), run_dir=ckpt.parent, on_eval=on_eval, restore=state)
+
+    def _init_from_policy(self, path: str) -> None:
+        """Start both networks from a shipped policy (fine-tuning); ValueError if it differs."""
+        net = load_policy(path).network
+        want = self.agent.q.shape_metadata()
+        if net.shape_metadata() != want:
+            raise ValueError(
+                f"init_policy {path}: network {net.shape_metadata()} differs from the config's "
+                f"{want}"
+            )
+        self.agent.q.load_state_dict(net.state_dict())
+        self.agent.sync_target()
 
     def _normalisation_states(self) -> np.ndarray:
         """Scaled states to standardise the inputs with: the demonstrations', or else the
