@@ -118,3 +118,17 @@ def test_short_training_beats_random_policy(tmp_path):
         trained["table7"]["norm_ij_position_m"]["median"]
         < 0.9 * (rand["table7"]["norm_ij_position_m"]["median"])
     )
+
+
+def test_init_policy_starts_from_the_shipped_weights_and_refuses_another_shape(tmp_path):
+    src = Trainer(_small(tmp_path, "src", seed=3), quiet=True)
+    src.run()
+    shipped = str(tmp_path / "src" / "final.pt")
+    tuned = Trainer(_small(tmp_path, "tuned", seed=4, init_policy=shipped), quiet=True)
+    for x, y in zip(_weights(src), _weights(tuned), strict=True):
+        assert torch.equal(x, y)
+    target = [v.clone() for v in tuned.agent.q_target.state_dict().values()]
+    for x, y in zip(_weights(src), target, strict=True):
+        assert torch.equal(x, y)
+    with pytest.raises(ValueError, match="differs from the config"):
+        Trainer(_small(tmp_path, "bad", init_policy=shipped, hidden=(16, 16)), quiet=True)
