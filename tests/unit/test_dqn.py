@@ -255,6 +255,8 @@ def test_config_flags_and_presets():
         65,
     )
     assert a1.hidden == (300, 200, 300) and a1.optimizer == "rmsprop" and a1.epsilon0 == 0.6
-    assert set(PRESETS) == {"paper-agent1", "paper-agent2", "best"}
+    assert set(PRESETS) == {"paper-agent1", "paper-agent2", "best", "robust"}
+    robust = preset("robust")
+    assert robust.init_policy == "models/pd_dqn_best.pt" and robust.dispersions == "standard"
     cfg = from_args(p.parse_args(["--hidden", "16,8"]))
     assert cfg.hidden == (16, 8)
