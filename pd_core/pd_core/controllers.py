@@ -31,6 +31,7 @@ class ZemZevParams:
     """Gains of the reference controller (ours, tuned on Table 3 with disturbances)."""
 
     brake_accel_mps2: float = 2.5  # vertical braking deceleration of the profile
+    brake_margin: float = 0.9  # ... at most this fraction of what full thrust gives at mass m
     land_speed_mps: float = 0.8  # descent speed the profile aims at on the pad
     vz_gain_per_s: float = 6.0  # vertical velocity-error gain (1/s)
     min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
@@ -38,6 +39,20 @@ class ZemZevParams:
     vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
     final_slope_per_s: float = 0.3  # near the pad descend no faster than land + this * z
     law: str = "zemzev"  # horizontal law: "zemzev" or "vtrack" (v_ref = -r / t_go)
+
+
+def braking_accel_mps2(
+    mass_kg: np.ndarray, params: ZemZevParams, max_vertical_thrust_n: float
+) -> np.ndarray:
+    """Deceleration of the braking profile for landers of mass `mass_kg`.
+
+    A profile steeper than full vertical thrust can follow leaves the lander behind it all the
+    way down: at 13 kN, 2.5 m/s^2 needs m <= 2093 kg, and ZEM/ZEV with a fixed 2.5 m/s^2 crashed
+    every lander it lost in the `mass` scenario (all above 2170 kg). The margin keeps authority
+    for the feedback (and covers a few % of thrust error); a nominal 2000 kg lander is unchanged.
+    """
+    capability = max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) + GRAVITY_MPS2[2]
+    return np.minimum(params.brake_accel_mps2, params.brake_margin * capability)
 
 
 class ZemZevController:
@@ -60,11 +75,12 @@ class ZemZevController:
         s = np.atleast_2d(states)
         r, v, m = s[:, 0:3], s[:, 3:6], s[:, 6]
         z = np.maximum(r[:, 2], 0.0)
-        brake = np.sqrt(p.land_speed_mps**2 + 2.0 * p.brake_accel_mps2 * z)
+        a_brake = braking_accel_mps2(m, p, self._hi[2])
+        brake = np.sqrt(p.land_speed_mps**2 + 2.0 * a_brake * z)
         vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])
         # time left on the braking profile (the coast before it is ignored: t_go is an estimate)
-        tgo = np.maximum((brake - p.land_speed_mps) / p.brake_accel_mps2, p.min_tgo_s)
+        tgo = np.maximum((brake - p.land_speed_mps) / a_brake, p.min_tgo_s)
         if p.law == "zemzev":
             a_h = -6.0 * r[:, 0:2] / tgo[:, None] ** 2 - 4.0 * v[:, 0:2] / tgo[:, None]
         else:
