@@ -1,11 +1,22 @@
 """Controller demonstrations for the DQfD memory: flown under the training dispersions, split
-between teachers, and filtered to the episodes that landed."""
+between teachers, filtered to the episodes that landed, and started where the student goes."""
+
+from pathlib import Path
 
 import numpy as np
+import pytest
 
+from pd_core.controllers import ZemZevController
 from pd_core.dqn.config import preset
-from pd_core.dqn.demonstrations import build_demo_memory, controller_steps
+from pd_core.dqn.demonstrations import (
+    build_demo_memory,
+    controller_steps,
+    recovery_starts,
+    recovery_steps,
+)
 from pd_core.dqn.train import training_reward
+from pd_core.evaluate import rollout
+from pd_core.policy import load_policy
 from pd_core.teacher_demos import controller_demonstrations
 
 
@@ -39,3 +50,31 @@ def test_demo_memory_splits_episodes_between_teachers() -> None:
     assert [c["episodes"] for c in info["controller"]] == [3, 2]
     assert all(c["dispersions"] == "gusts" for c in info["controller"])
     assert len(memory) == sum(c["transitions"] for c in info["controller"])
+
+
+POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+
+
+def test_recovery_demonstrations_start_on_the_students_own_paths() -> None:
+    starts, student = recovery_starts(POLICY, 8, 11, "delay")
+    ro = rollout(load_policy(POLICY), 8, 11, keep_trajectories=8, dispersions="delay")
+    assert student == ro.landed.mean()
+    for s, path in zip(starts, ro.trajectories, strict=True):
+        # a state of the path before touchdown (the last state is the terminal one)
+        assert np.min(np.abs(path[:-1] - s).max(axis=1)) == 0.0
+    assert np.ptp(starts[:, 2]) > 100.0  # drawn along the descent, not always the first state
+    steps, teacher, again = recovery_steps(POLICY, "zemzev", 8, 11, "delay")
+    assert again == student and 0.0 <= teacher <= 1.0
+    first = np.flatnonzero(np.r_[True, steps.episode[1:] != steps.episode[:-1]])
+    np.testing.assert_array_equal(steps.states[first], starts)  # the teacher flies on from there
+    np.testing.assert_array_equal(steps.actions, ZemZevController().act_batch(steps.states))
+
+
+def test_recovery_demonstrations_need_a_student() -> None:
+    cfg = preset("best", recovery_demo_episodes=4, controller_demo_episodes=0)
+    with pytest.raises(ValueError, match="init_policy"):
+        build_demo_memory(cfg, training_reward(cfg))
+    cfg = preset("robust", init_policy=POLICY, recovery_demo_episodes=4, controller_demo_episodes=0)
+    memory, info = build_demo_memory(cfg, training_reward(cfg))
+    assert info["recovery"]["student"] == POLICY and info["recovery"]["episodes"] == 4
+    assert len(memory) == info["recovery"]["transitions"] > 0

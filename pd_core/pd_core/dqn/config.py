@@ -87,6 +87,10 @@ class TrainConfig:
     demo_landed_only: bool = False
     """keep only the controller demonstrations of episodes that landed (a teacher that fails
     under a dispersion would otherwise be imitated into the crash by the margin loss)"""
+    recovery_demo_episodes: int = 0
+    """DAgger-style demonstrations: episodes of the (first) `controller` started from states that
+    `init_policy` visits under `dispersions`, one drawn uniformly along each of its episodes, so
+    the teacher shows how to recover from where the student goes (kept as demo_landed_only says)"""
     init_policy: str = ""
     """policy file (.pt with its .json) whose weights start the Q and target networks: fine-tuning
     (its network must match hidden/activation; "": random initialisation)"""
@@ -185,6 +189,7 @@ _NON_NEGATIVE = (
     "batch_demo",
     "margin",
     "controller_demo_episodes",
+    "recovery_demo_episodes",
     "pretrain_updates",
     "eval_every_s",
     "checkpoint_every_s",

@@ -13,12 +13,16 @@ from pd_core.config import RewardConfig
 from pd_core.demos import load_demos
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
+from pd_core.evaluate import rollout
+from pd_core.policy import load_policy
 from pd_core.reward import reward as shaped_reward
 from pd_core.state import scale_state
 from pd_core.teacher_demos import controller_demonstrations
 
 CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
+RECOVERY_SEED_OFFSET = 60_000_000
+"""... and the student episodes whose states start the recovery demonstrations, disjoint again."""
 
 
 class DemoTransitions(NamedTuple):
@@ -72,11 +76,52 @@ def controller_steps(
     The MPC teacher flies on every core."""
     workers = None if name.startswith("mpc") else 1
     d = controller_demonstrations(name, n_episodes, seed, dispersions=dispersions, workers=workers)
+    return _kept_steps(d, landed_only), float(d["success_rate"])
+
+
+def recovery_starts(
+    policy_path: str, n_episodes: int, seed: int, dispersions: str = ""
+) -> tuple[np.ndarray, float]:
+    """States (n_episodes, 7) the student policy visits: it flies episodes seed.. under
+    `dispersions` and one true state is drawn uniformly along each episode before touchdown.
+    Also the student's success rate."""
+    ro = rollout(
+        load_policy(policy_path),
+        n_episodes,
+        seed,
+        keep_trajectories=n_episodes,
+        dispersions=dispersions,
+    )
+    rng = np.random.default_rng(seed)
+    starts = np.stack([p[rng.integers(0, len(p) - 1)] for p in ro.trajectories])
+    return starts, float(np.mean(ro.landed))
+
+
+def recovery_steps(
+    policy_path: str,
+    name: str,
+    n_episodes: int,
+    seed: int,
+    dispersions: str = "",
+    landed_only: bool = False,
+) -> tuple[PhysicalSteps, float, float]:
+    """Teacher `name` flying on from states the student visits (DAgger-style demonstrations:
+    the student's states, the teacher's actions, and the teacher's own transitions so the TD
+    loss has them too): the steps, the teacher's success rate from those states and the
+    student's."""
+    starts, student = recovery_starts(policy_path, n_episodes, seed, dispersions)
+    workers = None if name.startswith("mpc") else 1
+    d = controller_demonstrations(
+        name, n_episodes, seed, dispersions=dispersions, initial_states=starts, workers=workers
+    )
+    return _kept_steps(d, landed_only), float(d["success_rate"]), student
+
+
+def _kept_steps(d: dict[str, np.ndarray], landed_only: bool) -> PhysicalSteps:
     keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
-    steps = PhysicalSteps(
+    return PhysicalSteps(
         *(d[k][keep] for k in ("states", "actions", "next_states", "dones", "episode"))
     )
-    return steps, float(d["success_rate"])
 
 
 def file_steps(path: Path) -> PhysicalSteps:
@@ -120,6 +165,28 @@ def build_demo_memory(
                     "dispersions": cfg.dispersions or "nominal",
                 }
             )
+    if cfg.batch_demo > 0 and cfg.recovery_demo_episodes > 0 and names:
+        if not cfg.init_policy:
+            raise ValueError("recovery_demo_episodes needs init_policy (the student whose states)")
+        seed = cfg.seed + RECOVERY_SEED_OFFSET
+        steps, success, student = recovery_steps(
+            cfg.init_policy,
+            names[0],
+            cfg.recovery_demo_episodes,
+            seed,
+            cfg.dispersions,
+            cfg.demo_landed_only,
+        )
+        parts.append(demo_transitions(steps, cfg, reward_cfg))
+        info["recovery"] = {
+            "name": names[0],
+            "student": cfg.init_policy,
+            "episodes": cfg.recovery_demo_episodes,
+            "transitions": len(steps.actions),
+            "success_rate": success,
+            "student_success_rate": student,
+            "landed_only": cfg.demo_landed_only,
+        }
     if not parts:
         return None, info
     return DemoMemory.fill(*(np.concatenate(col) for col in zip(*parts, strict=True))), info
