@@ -2,7 +2,8 @@
 
 `ZemZevController` is a feedback guidance law (not in the paper; ours): the vertical axis
 follows a constant-deceleration braking profile v_z(z) = -sqrt(v_land^2 + 2 a_brake z) (coast,
-then brake: a near bang-bang, fuel-lean profile) that flattens to v_land + c z near the pad; the
+then brake: a near bang-bang, fuel-lean profile; a_brake is 2.5 m/s^2, or 90 % of what full
+thrust gives at the observed mass if that is less) that flattens to v_land + c z near the pad; the
 horizontal axes use the ZEM/ZEV law a = -6 r / t_go^2 - 4 v / t_go, with t_go the time left on
 that braking profile. The commanded thrust T = m (a - g) is rounded to the nearest of the
 7 x 7 x 3 levels. It is Markov (a function of the state only), so a Q-network can imitate it, and

@@ -258,5 +258,6 @@ def test_config_flags_and_presets():
     assert set(PRESETS) == {"paper-agent1", "paper-agent2", "best", "robust"}
     robust = preset("robust")
     assert robust.init_policy == "models/pd_dqn_best.pt" and robust.dispersions == "standard"
+    assert robust.recovery_demo_episodes == robust.controller_demo_episodes == 1000
     cfg = from_args(p.parse_args(["--hidden", "16,8"]))
     assert cfg.hidden == (16, 8)
