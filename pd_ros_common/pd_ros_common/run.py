@@ -5,11 +5,14 @@ while it stops ("decision time overall ...") fails with "publisher's context is 
 SIGINT and SIGTERM only set a flag; the executor is spun in short slices until it is set, and
 the node stops (`on_shutdown`, `destroy_node`) with its context still valid. A start-up error of
 an expected kind (a bad parameter, a bad model file) is one line on stderr and an exit status,
-never a traceback.
+never a traceback. Once the node has stopped and logged, a DDS teardown that hangs (a known
+failure class, e.g. eProsima/Fast-DDS#235; seen once here in CI on a loaded machine) cannot keep
+the process alive: after `TEARDOWN_S` it says so in one line and exits with the same status.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -27,6 +30,24 @@ from rclpy.signals import SignalHandlerOptions
 
 from pd_ros_common.node_help import node_help, wants_help
 from pd_ros_common.params import ParameterError
+
+TEARDOWN_S = 5.0  # executor shutdown, destroy_node and rclpy shutdown take well under 1 s
+
+
+def _exit_if_teardown_hangs(name: str, status: int) -> threading.Timer:
+    def _exit() -> None:
+        print(
+            f"{name}: DDS teardown took over {TEARDOWN_S:g} s; exiting anyway",
+            file=sys.stderr,
+            flush=True,
+        )
+        sys.stdout.flush()
+        os._exit(status)
+
+    timer = threading.Timer(TEARDOWN_S, _exit)
+    timer.daemon = True
+    timer.start()
+    return timer
 
 
 def run_node(
@@ -54,6 +75,7 @@ def run_node(
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     node = executor = None
+    status = 0
     try:
         node = make_node()
         n = threads(node) if threads else 0
@@ -65,15 +87,17 @@ def run_node(
         pass
     except tuple(c for c, _ in codes) as exc:
         print(f"{name}: cannot start: {exc}", file=sys.stderr, flush=True)
-        return next(code for c, code in codes if isinstance(exc, c))
+        status = next(code for c, code in codes if isinstance(exc, c))
     finally:
         if node is not None:
             on_shutdown = getattr(node, "on_shutdown", None)
             if on_shutdown is not None:
                 on_shutdown()
+        watchdog = _exit_if_teardown_hangs(name, status)
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+        watchdog.cancel()
+    return status

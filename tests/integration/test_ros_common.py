@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -92,3 +95,22 @@ def test_domain_claims_differ_and_override(monkeypatch):
     finally:
         os.close(fd_a)
         os.close(fd_b)
+
+
+def test_a_hanging_teardown_exits_with_the_status_and_one_line():
+    """The watchdog run_node starts after on_shutdown: a teardown stuck past TEARDOWN_S exits."""
+    code = (
+        "import time\n"
+        "from pd_ros_common import run\n"
+        "run.TEARDOWN_S = 0.2\n"
+        "run._exit_if_teardown_hangs('pd_x_node', 2)\n"
+        "time.sleep(30)\n"
+    )
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=20)
+    assert out.returncode == 2 and time.monotonic() - t0 < 15.0
+    assert out.stderr.strip() == "pd_x_node: DDS teardown took over 0.2 s; exiting anyway"
+    # a teardown that finishes cancels it
+    code = code.replace("run._exit", "w = run._exit").replace("time.sleep(30)", "w.cancel()")
+    out = subprocess.run([sys.executable, "-c", code + "time.sleep(0.5)\n"], timeout=20)
+    assert out.returncode == 0
