@@ -69,14 +69,30 @@ def demo_transitions(
 
 
 def controller_steps(
-    name: str, n_episodes: int, seed: int, dispersions: str = "", landed_only: bool = False
+    name: str,
+    n_episodes: int,
+    seed: int,
+    dispersions: str = "",
+    landed_only: bool = False,
+    initial_states: np.ndarray | None = None,
 ) -> tuple[PhysicalSteps, float]:
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
-    env under `dispersions`, of every episode or only of those that landed; its success rate.
-    The MPC teacher flies on every core."""
+    env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
+    those that landed; its success rate. The MPC teacher flies on every core."""
     workers = None if name.startswith("mpc") else 1
-    d = controller_demonstrations(name, n_episodes, seed, dispersions=dispersions, workers=workers)
-    return _kept_steps(d, landed_only), float(d["success_rate"])
+    d = controller_demonstrations(
+        name,
+        n_episodes,
+        seed,
+        dispersions=dispersions,
+        initial_states=initial_states,
+        workers=workers,
+    )
+    keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
+    steps = PhysicalSteps(
+        *(d[k][keep] for k in ("states", "actions", "next_states", "dones", "episode"))
+    )
+    return steps, float(d["success_rate"])
 
 
 def recovery_starts(
@@ -110,18 +126,8 @@ def recovery_steps(
     loss has them too): the steps, the teacher's success rate from those states and the
     student's."""
     starts, student = recovery_starts(policy_path, n_episodes, seed, dispersions)
-    workers = None if name.startswith("mpc") else 1
-    d = controller_demonstrations(
-        name, n_episodes, seed, dispersions=dispersions, initial_states=starts, workers=workers
-    )
-    return _kept_steps(d, landed_only), float(d["success_rate"]), student
-
-
-def _kept_steps(d: dict[str, np.ndarray], landed_only: bool) -> PhysicalSteps:
-    keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
-    return PhysicalSteps(
-        *(d[k][keep] for k in ("states", "actions", "next_states", "dones", "episode"))
-    )
+    steps, teacher = controller_steps(name, n_episodes, seed, dispersions, landed_only, starts)
+    return steps, teacher, student
 
 
 def file_steps(path: Path) -> PhysicalSteps:
