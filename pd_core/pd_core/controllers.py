@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
-from pd_core.config import GRAVITY_MPS2
+from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.mpc import MPCController, mpc_controller
 from pd_core.state import check_state
 
@@ -34,12 +34,18 @@ class ZemZevParams:
     brake_accel_mps2: float = 2.5  # vertical braking deceleration of the profile
     brake_margin: float = 0.9  # ... at most this fraction of what full thrust gives at mass m
     land_speed_mps: float = 0.8  # descent speed the profile aims at on the pad
-    vz_gain_per_s: float = 6.0  # vertical velocity-error gain (1/s)
+    vz_gain_per_s: float = 0.6 / DT_S  # vertical velocity-error gain (1/s): see below
     min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
     flare_altitude_m: float = 0.5  # below this, horizontal axes only null velocity
     vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
     final_slope_per_s: float = 0.3  # near the pad descend no faster than land + this * z
     law: str = "zemzev"  # horizontal law: "zemzev" or "vtrack" (v_ref = -r / t_go)
+
+    # Why 3/s: the vertical loop is e' = -K e, flown in 0.2 s steps. With a command that acts one
+    # step late (scenario `delay`) the error obeys e[k+1] = e[k] - K dt e[k-1], whose poles
+    # z^2 - z + K dt = 0 leave the unit circle at K dt = 1. The former 6/s (K dt = 1.2) was stable
+    # only without delay: under `delay` it rang and touched down at 2.0-2.1 m/s (6.7 % lost).
+    # K dt = 0.6 keeps |z| = 0.77 with the delay and a 0.4 pole without it.
 
 
 def braking_accel_mps2(
