@@ -3,11 +3,12 @@
 `ZemZevController` is a feedback guidance law (not in the paper; ours): the vertical axis
 follows a constant-deceleration braking profile v_z(z) = -sqrt(v_land^2 + 2 a_brake z) (coast,
 then brake: a near bang-bang, fuel-lean profile; a_brake is 2.5 m/s^2, or 90 % of what full
-thrust gives at the observed mass if that is less) that flattens to v_land + c z near the pad; the
-horizontal axes use the ZEM/ZEV law a = -6 r / t_go^2 - 4 v / t_go, with t_go the time left on
-that braking profile. The commanded thrust T = m (a - g) is rounded to the nearest of the
-7 x 7 x 3 levels. It is Markov (a function of the state only), so a Q-network can imitate it, and
-it flies the disturbed env, so its transitions are on-distribution demonstrations.
+thrust gives at the observed mass if that is less, or less again when the lateral axes need more
+time than the profile leaves) that flattens to v_land + c z near the pad; the horizontal axes use
+the ZEM/ZEV law a = -6 r / t_go^2 - 4 v / t_go, with t_go the time left on that braking profile.
+The commanded thrust T = m (a - g) is rounded to the nearest of the 7 x 7 x 3 levels. It is
+Markov (a function of the state only), so a Q-network can imitate it, and it flies the disturbed
+env, so its transitions are on-distribution demonstrations.
 `pd-eval --controller zemzev` evaluates it like a trained policy.
 
 `mpc-fuel` and `mpc-energy` are the receding-horizon optimal-control teacher (`pd_core.mpc`) with
@@ -33,8 +34,10 @@ class ZemZevParams:
 
     brake_accel_mps2: float = 2.5  # vertical braking deceleration of the profile
     brake_margin: float = 0.9  # ... at most this fraction of what full thrust gives at mass m
-    land_speed_mps: float = 0.8  # descent speed the profile aims at on the pad
+    land_speed_mps: float = 0.5  # descent speed the profile aims at on the pad: see below
     vz_gain_per_s: float = 0.6 / DT_S  # vertical velocity-error gain (1/s): see below
+    min_brake_accel_mps2: float = 0.3  # floor of a lateral-limited profile: keep descending
+    lateral_limit: bool = True  # slow the descent when the lateral axes need more time
     min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
     flare_altitude_m: float = 0.5  # below this, horizontal axes only null velocity
     vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
@@ -46,6 +49,9 @@ class ZemZevParams:
     # z^2 - z + K dt = 0 leave the unit circle at K dt = 1. The former 6/s (K dt = 1.2) was stable
     # only without delay: under `delay` it rang and touched down at 2.0-2.1 m/s (6.7 % lost).
     # K dt = 0.6 keeps |z| = 0.77 with the delay and a 0.4 pole without it.
+    # Why 0.5 m/s: the vertical axis has three levels, so the loop limit-cycles by about one
+    # step of free fall (g dt = 0.74 m/s), two with a step of delay. 2 m/s (Eq. 12) - 2 g dt =
+    # 0.52 m/s. The former 0.8 m/s touched down at 2.0-2.2 m/s in `all` (delay, noise, mass).
 
 
 def braking_accel_mps2(
@@ -60,6 +66,28 @@ def braking_accel_mps2(
     """
     capability = max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) + GRAVITY_MPS2[2]
     return np.minimum(params.brake_accel_mps2, params.brake_margin * capability)
+
+
+def min_time_to_rest_s(
+    position_m: np.ndarray, velocity_mps: np.ndarray, accel_mps2: np.ndarray
+) -> np.ndarray:
+    """Shortest time (s) to bring x'' = u, |u| <= accel, to rest at 0 (bang-bang, one switch).
+
+    Elementwise; the lower bound on the time any lateral law needs with that authority.
+    """
+    r, v, a = np.broadcast_arrays(position_m, velocity_mps, accel_mps2)
+    ahead = r + v * np.abs(v) / (2.0 * a) > 0.0  # beyond the switching curve: brake with -a
+    s = np.where(ahead, 1.0, -1.0)
+    return (s * v + 2.0 * np.sqrt(np.maximum(s * a * r + 0.5 * v * v, 0.0))) / a
+
+
+def profile_accel_for_time_mps2(
+    altitude_m: np.ndarray, time_s: np.ndarray, land_speed_mps: float
+) -> np.ndarray:
+    """Deceleration a of the braking profile whose descent from `altitude_m` lasts `time_s`:
+    (sqrt(v_land^2 + 2 a z) - v_land) / a = t  <=>  a = 2 (z - t v_land) / t^2."""
+    t = np.maximum(time_s, 1e-6)
+    return 2.0 * (altitude_m - t * land_speed_mps) / (t * t)
 
 
 class ZemZevController:
@@ -83,6 +111,12 @@ class ZemZevController:
         r, v, m = s[:, 0:3], s[:, 3:6], s[:, 6]
         z = np.maximum(r[:, 2], 0.0)
         a_brake = braking_accel_mps2(m, p, self._hi[2])
+        if p.lateral_limit:
+            # a lander too far off (or too fast) sideways for full lateral thrust to null within
+            # the profile's time descends slower (wide-box corners: 2.0 % lost without it)
+            t_lat = min_time_to_rest_s(r[:, 0:2], v[:, 0:2], self._hi[0:2] / m[:, None])
+            a_lat = profile_accel_for_time_mps2(z, t_lat.max(axis=1), p.land_speed_mps)
+            a_brake = np.minimum(a_brake, np.maximum(a_lat, p.min_brake_accel_mps2))
         brake = np.sqrt(p.land_speed_mps**2 + 2.0 * a_brake * z)
         vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])

@@ -1,10 +1,17 @@
-"""ZEM/ZEV reference controller: its braking profile stays within the thrust a lander has."""
+"""ZEM/ZEV reference controller: its braking profile stays within the thrust a lander has, its
+vertical loop survives a step of delay, and it slows down for a lateral error it cannot null."""
 
 import numpy as np
 import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
-from pd_core.controllers import ZemZevController, ZemZevParams, braking_accel_mps2
+from pd_core.controllers import (
+    ZemZevController,
+    ZemZevParams,
+    braking_accel_mps2,
+    min_time_to_rest_s,
+    profile_accel_for_time_mps2,
+)
 from pd_core.dispersions import SCENARIOS, Dispersions
 from pd_core.evaluate import rollout
 
@@ -37,5 +44,39 @@ def test_vertical_loop_stays_damped_with_one_step_of_delay():
     ro = rollout(ZemZevController(), 200, seed=0, dispersions=delay)
     assert ro.landed.all()
     assert ro.final_states[:, 5].min() > -1.9  # the former gain: -2.12 m/s
-    old = ZemZevController(ZemZevParams(vz_gain_per_s=6.0))
+    old = ZemZevController(ZemZevParams(vz_gain_per_s=6.0, land_speed_mps=0.8))
     assert rollout(old, 200, seed=0, dispersions=delay).landed.mean() < 0.97
+
+
+def test_min_time_to_rest_is_the_bang_bang_time():
+    r = np.array([100.0, -100.0, 0.0, 0.0, 10.0])
+    v = np.array([0.0, 0.0, 0.0, 10.0, -10.0])
+    t = min_time_to_rest_s(r, v, 2.0)
+    # from rest: accelerate half the way, brake half: 2 sqrt(r / a)
+    assert t[:2] == pytest.approx([2.0 * np.sqrt(50.0)] * 2, rel=1e-12)
+    assert t[2] == 0.0
+    # at the pad at 10 m/s: 5 s to stop 25 m out, then 2 sqrt(25 / 2) back
+    assert t[3] == pytest.approx(5.0 + 2.0 * np.sqrt(12.5), rel=1e-12)
+    # 10 m out closing at 10 m/s overshoots to -15 m (5 s), then 2 sqrt(15 / 2) back
+    assert t[4] == pytest.approx(5.0 + 2.0 * np.sqrt(7.5), rel=1e-12)
+
+
+def test_profile_accel_for_time_inverts_the_profile_duration():
+    a = profile_accel_for_time_mps2(np.array([2000.0]), np.array([45.0]), 0.5)
+    descent = (np.sqrt(0.5**2 + 2.0 * a * 2000.0) - 0.5) / a
+    assert descent == pytest.approx([45.0], rel=1e-12)
+
+
+def test_landers_far_off_sideways_slow_their_descent_and_land():
+    """Wide-box corners (|y| ~ 1600 m, drifting away at 40 m/s): full lateral thrust needs more
+    time than the nominal profile leaves; only the lateral-limited profile lands them."""
+    rng = np.random.default_rng(0)
+    n = 40
+    s = np.zeros((n, 7))
+    side = np.where(rng.uniform(size=n) < 0.5, -1.0, 1.0)
+    s[:, 0], s[:, 1] = rng.uniform(400.0, 1200.0, n), side * rng.uniform(1550.0, 1650.0, n)
+    s[:, 2:7] = [2450.0, 0.0, 0.0, -85.0, 2000.0]
+    s[:, 3], s[:, 4] = rng.uniform(-60.0, 0.0, n), side * 40.0
+    assert rollout(ZemZevController(), n, 0, initial_states=s).landed.all()
+    unlimited = ZemZevController(ZemZevParams(lateral_limit=False))
+    assert rollout(unlimited, n, 0, initial_states=s).landed.mean() < 0.2
