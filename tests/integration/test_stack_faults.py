@@ -107,6 +107,12 @@ def test_lockstep_auto_restart_recorded_without_loss(stack, make_node, spin_unti
         return sum(r.episode >= first for r in probe.results)
 
     assert spin_until(lambda: episodes() >= 3, 120.0), procs.logs()
+    # A SIGKILL keeps what the recorder wrote up to its last chunk: kill it once it has written
+    # an episode result (its writer thread may lag the probe on a loaded machine) and closed
+    # that chunk (every --flush 0.5 s).
+    heard = "first message on /lander/episode"
+    assert spin_until(lambda: heard in killed.log(), 60.0), killed.log()
+    spin_until(lambda: False, 1.5)
     killed.stop(sig=signal.SIGKILL)
     assert spin_until(lambda: episodes() >= 5, 120.0), procs.logs()  # item 6
     t0 = time.monotonic()
