@@ -217,6 +217,22 @@ def _from_yaml(path: Path) -> list[Dispersions]:
     return out
 
 
+def failure_weights(failures: np.ndarray, episodes: np.ndarray, uniform_share: float) -> np.ndarray:
+    """Probabilities of drawing each scenario in training: `uniform_share` spread evenly, the
+    rest in proportion to each scenario's recent failure rate, Laplace-smoothed ((f+1)/(n+2),
+    so a scenario not flown yet counts as 50 %). Domain randomisation then spends its episodes
+    where the policy fails instead of where it already lands, and never stops visiting the
+    others."""
+    failures, episodes = np.asarray(failures, float), np.asarray(episodes, float)
+    if failures.shape != episodes.shape or failures.ndim != 1 or not failures.size:
+        raise ValueError("failures and episodes: one count per scenario")
+    if not 0.0 <= uniform_share <= 1.0:
+        raise ValueError(f"uniform_share must lie in [0, 1], got {uniform_share!r}")
+    rate = (failures + 1.0) / (episodes + 2.0)
+    k = failures.size
+    return uniform_share / k + (1.0 - uniform_share) * rate / rate.sum()
+
+
 # --- per-episode draws and the actuator model -------------------------------------------------
 
 

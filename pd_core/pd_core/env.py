@@ -227,9 +227,10 @@ class PoweredDescentVectorEnv:
     stepped, reward 0, `active` False) until the next `reset`, so `while env.active.any()` flies
     exactly those episodes.
 
-    `dispersions` (one `Dispersions`, or several: each episode then picks one uniformly) are off
-    by default. Observations are of the state the agent observes (`observed_states`: the true
-    state plus the episode's navigation noise); `states` and `info["state"]` are true states.
+    `dispersions` (one `Dispersions`, or several: each episode then picks one, uniformly or with
+    `set_scenario_probs`) are off by default. Observations are of the state the agent observes
+    (`observed_states`: the true state plus the episode's navigation noise); `states` and
+    `info["state"]` are true states.
     """
 
     def __init__(
@@ -273,6 +274,7 @@ class PoweredDescentVectorEnv:
         self._active = np.ones(num_envs, dtype=bool)
         self._thrust_max = actions.limits.hi
         self._disp = DispersionArrays(num_envs, scen, self.max_steps)
+        self._probs: np.ndarray | None = None
 
     @property
     def active(self) -> np.ndarray:
@@ -284,9 +286,39 @@ class PoweredDescentVectorEnv:
         """(N, 7) the physical states the agent observes (true states plus navigation noise)."""
         return self._disp.observed(self.states, self.steps)
 
+    @property
+    def scenario_probs(self) -> np.ndarray | None:
+        """Probabilities each new episode draws the scenarios with (None: uniform)."""
+        return None if self._probs is None else self._probs.copy()
+
+    def set_scenario_probs(self, probs: np.ndarray | None) -> None:
+        """Draw the scenarios of new episodes with `probs` (None: uniformly, the default)."""
+        if probs is not None:
+            probs = np.asarray(probs, dtype=float)
+            if probs.shape != (len(self.scenarios),) or probs.min() < 0 or probs.sum() <= 0:
+                raise ValueError(
+                    f"scenario probabilities: need {len(self.scenarios)} non-negative numbers "
+                    f"with a positive sum, got {probs!r}"
+                )
+            probs = probs / probs.sum()
+        self._probs = probs
+
+    @property
+    def episode_scenarios(self) -> np.ndarray:
+        """(N,) index into `scenarios` of each sub-env's current episode."""
+        return self._disp.scenario.copy()
+
+    def _draw_scenario(self, rng: np.random.Generator) -> int:
+        if len(self.scenarios) == 1:
+            return 0
+        if self._probs is None:
+            return int(rng.integers(len(self.scenarios)))
+        k = int(np.searchsorted(np.cumsum(self._probs), rng.random(), side="right"))
+        return min(k, len(self.scenarios) - 1)
+
     def _reset_one(self, i: int, initial_state: np.ndarray | None) -> None:
         rng = self._rngs[i]
-        k = 0 if len(self.scenarios) == 1 else int(rng.integers(len(self.scenarios)))
+        k = self._draw_scenario(rng)
         d = self.scenarios[k]
         if initial_state is None:
             self.states[i] = sample_initial_state(rng, self._boxes[k])
@@ -366,6 +398,7 @@ class PoweredDescentVectorEnv:
             "fuel_kg": self.initial_states[:, 6] - self.states[:, 6],
             "steps": self.steps.copy(),
             "initial_state": self.initial_states.copy(),
+            "scenario": self._disp.scenario.copy(),
         }
         if not self.autoreset:
             self._active &= ~done
@@ -396,6 +429,8 @@ class PoweredDescentVectorEnv:
             "rngs": [r.bit_generator.state for r in self._rngs],
             "scenarios": [s.to_dict() for s in self.scenarios],
         }
+        if self._probs is not None:
+            d["scenario_probs"] = self._probs.copy()
         d.update(self._disp.state_dict())
         return d
 
@@ -416,6 +451,7 @@ class PoweredDescentVectorEnv:
         for r, s in zip(self._rngs, d["rngs"], strict=True):
             r.bit_generator.state = s
         self._disp.load_state_dict(d)
+        self.set_scenario_probs(d.get("scenario_probs"))
 
 
 def make_vector_env(

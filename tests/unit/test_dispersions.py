@@ -10,7 +10,7 @@ import pytest
 from pd_core import dynamics
 from pd_core.config import DT_S, G0_MPS2, ISP_S, TABLE3
 from pd_core.controllers import ZemZevController
-from pd_core.dispersions import SCENARIOS, Dispersions, load_scenarios
+from pd_core.dispersions import SCENARIOS, Dispersions, failure_weights, load_scenarios
 from pd_core.env import make_vector_env
 from pd_core.evaluate import rollout
 
@@ -161,3 +161,33 @@ def test_yaml_scenarios_and_bad_names(tmp_path):
     with pytest.raises(ValueError, match="thrust_eror"):
         load_scenarios(str(f))
     assert math.isclose(SCENARIOS["all"].misalignment_deg, 2.0)
+
+
+def test_failure_weights_floor_and_proportion():
+    # 200 episodes each: scenario 2 fails 20 %, the others never; half the draws stay uniform
+    p = failure_weights(np.array([0, 0, 40]), np.array([200, 200, 200]), uniform_share=0.5)
+    rate = np.array([1, 1, 41]) / 202  # Laplace-smoothed
+    np.testing.assert_allclose(p, 0.5 / 3 + 0.5 * rate / rate.sum(), rtol=1e-12)
+    assert p.sum() == pytest.approx(1.0) and p[2] > 0.6 and p[0] > 0.5 / 3
+    # equal failure rates (or nothing flown yet): uniform
+    np.testing.assert_allclose(failure_weights(np.zeros(4), np.zeros(4), 0.2), 0.25)
+    with pytest.raises(ValueError, match="uniform_share"):
+        failure_weights(np.zeros(2), np.zeros(2), 1.5)
+
+
+def test_scenario_probs_steer_the_draws_and_survive_a_state_dict():
+    env = make_vector_env(2000, autoreset=False, dispersions="nominal,mass,all")
+    env.reset(seed=4)
+    counts = np.bincount(env.episode_scenarios, minlength=3) / 2000
+    np.testing.assert_allclose(counts, 1 / 3, atol=0.04)  # uniform by default (4 sigma)
+    env.set_scenario_probs(np.array([0.1, 0.1, 0.8]))
+    env.reset(seed=4)
+    counts = np.bincount(env.episode_scenarios, minlength=3) / 2000
+    np.testing.assert_allclose(counts, [0.1, 0.1, 0.8], atol=0.04)
+    mass = env.initial_states[env.episode_scenarios == 1, 6]
+    assert mass.min() >= 1800 and mass.max() <= 2200 and mass.std() > 50  # the mass scenario's
+    other = make_vector_env(2000, autoreset=False, dispersions="nominal,mass,all")
+    other.load_state_dict(env.state_dict())
+    np.testing.assert_allclose(other.scenario_probs, [0.1, 0.1, 0.8])
+    with pytest.raises(ValueError, match="3 non-negative"):
+        env.set_scenario_probs(np.array([0.5, 0.5]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from pd_core.dqn.train import Trainer, train
 from pd_core.evaluate import rollout, summarise
 
 torch.set_num_threads(1)
+SHIPPED = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
 
 
 def _small(tmp_path, name: str, **kw) -> TrainConfig:
@@ -132,3 +134,27 @@ def test_init_policy_starts_from_the_shipped_weights_and_refuses_another_shape(t
         assert torch.equal(x, y)
     with pytest.raises(ValueError, match="differs from the config"):
         Trainer(_small(tmp_path, "bad", init_policy=shipped, hidden=(16, 16)), quiet=True)
+
+
+def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path):
+    # from the shipped nominal policy, barely changed (lr 1e-7): it lands `nominal` and fails
+    # `all` about half the time
+    cfg = _small(
+        tmp_path, "sf", seed=3, dispersions="nominal,all", scenario_sampling="failures",
+        scenario_uniform_share=0.2, max_updates=1500, num_envs=32, pretrain_updates=0,
+        init_policy=SHIPPED, hidden=preset("best").hidden, epsilon0=0.0, lr=1e-7, lr_finetune=1e-7,
+    )  # fmt: skip
+    tr = Trainer(cfg, quiet=True)
+    tr.run()
+    fails = tr.outcomes.failure_rates()
+    p = tr.env.scenario_probs
+    flown = [len(r) for r in tr.outcomes.recent]
+    assert fails[0] < 0.05 and fails[1] > 0.2, fails
+    assert flown[1] > 2 * flown[0], flown  # the draws went where it fails
+    np.testing.assert_allclose(p, tr.outcomes.probs())
+    assert p[1] > 0.6 and p[0] >= 0.1  # most draws go where it fails; the floor stays
+    res = Trainer.resume(tmp_path / "sf", {"max_updates": 1500})
+    assert [list(r) for r in res.outcomes.recent] == [list(r) for r in tr.outcomes.recent]
+    np.testing.assert_allclose(res.env.scenario_probs, p)
+    rows = (tmp_path / "sf" / "scenarios.csv").read_text().splitlines()
+    assert rows[0].startswith("wall_s,episodes,p_nominal,p_all,fail_nominal,fail_all")

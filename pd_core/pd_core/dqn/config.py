@@ -100,6 +100,14 @@ class TrainConfig:
     """dispersions the training envs, the controller demonstrations and the periodic evaluations
     sample (domain randomisation): a scenario or campaign name or a YAML file of
     pd_core.dispersions ("": nominal, the paper)"""
+    scenario_sampling: str = "uniform"
+    """how training episodes draw their `dispersions` scenario: uniform, or failures (in
+    proportion to each scenario's recent training failure rate, over a uniform floor; the
+    periodic evaluations stay uniform)"""
+    scenario_uniform_share: float = 0.5
+    """with scenario_sampling=failures: the share of episodes still drawn uniformly"""
+    scenario_window: int = 200
+    """with scenario_sampling=failures: recent training episodes per scenario it counts"""
     fuel_weight: float = 1.0
     """multiplies beta (control effort) of the training reward; evaluation is unaffected"""
     eval_every_s: float = 60.0
@@ -181,6 +189,7 @@ PRESETS["robust"] = {
 }
 
 
+SCENARIO_SAMPLING = ("uniform", "failures")
 _POSITIVE = ("episodes", "num_envs", "batch_agent", "gamma", "lr", "n_step", "buffer_size")
 _NON_NEGATIVE = (
     "max_minutes",
@@ -217,6 +226,15 @@ def check_config(cfg: TrainConfig) -> None:
         raise ValueError(f"gamma must be <= 1, got {cfg.gamma!r}")
     if cfg.target_period < 1 or cfg.eval_episodes < 1:
         raise ValueError("target_period and eval_episodes must be >= 1")
+    if cfg.scenario_sampling not in SCENARIO_SAMPLING:
+        raise ValueError(
+            f"scenario_sampling must be one of {SCENARIO_SAMPLING}, got {cfg.scenario_sampling!r}"
+        )
+    if not 0.0 <= cfg.scenario_uniform_share <= 1.0 or cfg.scenario_window < 1:
+        raise ValueError(
+            "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
+            f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
+        )
     if not cfg.hidden or min(cfg.hidden) < 1:
         raise ValueError(f"hidden must be positive layer widths, got {cfg.hidden!r}")
 

@@ -34,7 +34,8 @@ from pd_core.dqn.checkpoint import (
 from pd_core.dqn.config import TrainConfig, check_config
 from pd_core.dqn.demonstrations import build_demo_memory
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
-from pd_core.dqn.run_log import RunLogs, run_folder
+from pd_core.dqn.run_log import CsvLog, RunLogs, run_folder
+from pd_core.dqn.scenario_outcomes import ScenarioOutcomes
 from pd_core.env import make_vector_env
 from pd_core.evaluate import rollout, summarise
 from pd_core.plots import training_curves
@@ -115,6 +116,12 @@ class Trainer:
         self.env = make_vector_env(
             cfg.num_envs, reward_cfg=self.reward_cfg, dispersions=cfg.dispersions
         )
+        self.outcomes: ScenarioOutcomes | None = None
+        if cfg.scenario_sampling == "failures" and len(self.env.scenarios) > 1:
+            self.outcomes = ScenarioOutcomes(
+                len(self.env.scenarios), cfg.scenario_window, cfg.scenario_uniform_share
+            )
+            self.env.set_scenario_probs(self.outcomes.probs())
         self.obs, _ = self.env.reset(seed=cfg.seed * 1000)
         self.collector = NStepCollector(cfg.num_envs, cfg.n_step, cfg.gamma)
         self.ep_return = np.zeros(cfg.num_envs)
@@ -122,6 +129,7 @@ class Trainer:
         self.recent: deque[tuple[float, int]] = deque(maxlen=100)  # (return, landed)
         self.last_info: dict[str, float] = {}
         self.pretrained = 0
+        self._scenario_log: CsvLog | None = None
         self._t0 = time.perf_counter()
         if restore is not None:
             self.load_state_dict(restore)
@@ -185,6 +193,7 @@ class Trainer:
             "ep_return": torch.from_numpy(self.ep_return.copy()),
             "collector": encode({k: getattr(self.collector, k) for k in NStepCollector.STATE}),
             "recent": json.dumps(list(self.recent)),
+            "scenario_outcomes": self.outcomes.to_json() if self.outcomes else "",
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -206,6 +215,8 @@ class Trainer:
         for k, v in decode(state["collector"]).items():
             setattr(self.collector, k, v)
         self.recent.extend((float(r), int(ok)) for r, ok in json.loads(state["recent"]))
+        if self.outcomes is not None and state.get("scenario_outcomes"):
+            self.outcomes.load_json(state["scenario_outcomes"])
 
     def checkpoint(self) -> Path:
         return write_checkpoint(self.run_dir, self.state_dict())
@@ -282,11 +293,15 @@ class Trainer:
                 self._log_metrics(logs, bar, t, eps)
             self._eval_and_checkpoint(logs, t)
         self.c.wall_s = self._now()
+        if self.outcomes is not None:
+            self._log_scenarios(self.c.wall_s)
         if cfg.eval_every_s > 0:
             self._periodic_eval(logs)
         final = self.save_policies("final")
         self.checkpoint()
         logs.close()
+        if self._scenario_log is not None:
+            self._scenario_log.close()
         if bar is not None:
             bar.close()
         self._plot_curves()
@@ -368,8 +383,12 @@ class Trainer:
             )
             self.recent.append((float(self.ep_return[i]), int(ok)))
             self.ep_return[i] = 0.0
+            if self.outcomes is not None:
+                self.outcomes.record(int(info["scenario"][i]), ok)
             if bar is not None:
                 bar.update(1)
+        if self.outcomes is not None and np.any(term | trunc):
+            self.env.set_scenario_probs(self.outcomes.probs())
         self.obs = nobs
 
     def _log_metrics(self, logs: RunLogs, bar: Any, t: float, eps: float) -> None:
@@ -387,11 +406,26 @@ class Trainer:
             suc,
         )
         logs.flush()
+        if self.outcomes is not None:
+            self._log_scenarios(t)
         if bar is not None:
             bar.set_postfix_str(
                 f"eps {eps:.3f} succ100 {suc:.2f} loss {self.last_info.get('loss', 0):.3g}"
                 f" upd {self.agent.updates}"
             )
+
+    def _log_scenarios(self, t: float) -> None:
+        """scenarios.csv: each scenario's draw probability and recent training failure rate."""
+        assert self.outcomes is not None
+        if self._scenario_log is None:
+            names = [d.name for d in self.env.scenarios]
+            head = ("wall_s", "episodes", *(f"p_{n}" for n in names), *(f"fail_{n}" for n in names))
+            self._scenario_log = CsvLog(self.run_dir / "scenarios.csv", head)
+        self._scenario_log.row(
+            t, self.c.episodes, *map(float, self.outcomes.probs()),
+            *map(float, self.outcomes.failure_rates()),
+        )  # fmt: skip
+        self._scenario_log.flush()
 
     def _eval_and_checkpoint(self, logs: RunLogs, t: float) -> None:
         """The periodic work shared by pre-training and interaction: evaluate, then checkpoint."""
