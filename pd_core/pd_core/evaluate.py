@@ -76,8 +76,10 @@ def rollout(
     *,
     dispersions: str | Dispersions | Sequence[Dispersions] = "",
     chunk: int = CHUNK_EPISODES,
+    episode_seeds: Sequence[int] | None = None,
 ) -> Rollouts:
-    """Fly episodes 0..n_episodes-1 (episode i: env seed seed + i) with greedy actions.
+    """Fly episodes 0..n_episodes-1 (episode i: env seed seed + i, or episode_seeds[i]) with
+    greedy actions.
 
     Episodes are flown `chunk` at a time in one vector env (memory stays bounded for 10^6
     episodes); the result does not depend on how the caller splits a campaign as long as the
@@ -101,19 +103,24 @@ def rollout(
             )
         init = None if initial_states is None else initial_states[start : start + n]
         keep = max(0, min(keep_trajectories - start, n))
-        parts.append(fly_episodes(actor, env, seed + start, init, keep))
+        seeds = (
+            seed + start
+            if episode_seeds is None
+            else [int(s) for s in episode_seeds[start : start + n]]
+        )
+        parts.append(fly_episodes(actor, env, seeds, init, keep))
     return concat_rollouts(parts)
 
 
 def fly_episodes(
     actor: Actor,
     env: PoweredDescentVectorEnv,
-    seed: int,
+    seed: int | list[int],
     initial_states: np.ndarray | None = None,
     keep_trajectories: int = 0,
 ) -> Rollouts:
     """Fly one episode in each sub-env of `env` (made with autoreset=False), sub-env i with
-    seed seed + i; the actor sees the observed states of the landers still flying."""
+    seed seed + i (or seed[i]); the actor sees the observed states of the landers still flying."""
     opts = None if initial_states is None else {"initial_state": initial_states}
     _, info = env.reset(seed=seed, options=opts)
     n = env.num_envs

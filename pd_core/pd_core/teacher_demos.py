@@ -72,9 +72,10 @@ def _fly_chunk(
     first_episode: int,
     dispersions: Any,
     initial_states: np.ndarray | None,
+    episode_seeds: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """Transitions of episodes first_episode .. + n - 1 (env seeds seed ..) of a fresh
-    controller."""
+    """Transitions of episodes first_episode .. + n - 1 (env seeds seed .., or episode_seeds)
+    of a fresh controller."""
     ro = rollout(
         make_controller(controller),
         n,
@@ -82,6 +83,7 @@ def _fly_chunk(
         keep_trajectories=n,
         initial_states=initial_states,
         dispersions=dispersions,
+        episode_seeds=episode_seeds,
     )
     return rollout_steps(ro, first_episode)
 
@@ -95,12 +97,13 @@ def controller_demonstrations(
     initial_states: np.ndarray | None = None,
     workers: int | None = None,
     chunk: int = DEMO_CHUNK_EPISODES,
+    episode_seeds: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Physical 1-step transitions of a controller of `pd_core.controllers` (the MPC teacher
     `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
     seed + i, disturbances on; initial state sampled from Table 3 or row i of `initial_states`):
     states, actions, next_states, dones, episode, landed (per episode) and success_rate.
-    `dispersions` as
+    `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
     `pd_core.evaluate.rollout`; `workers` None = every core."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
@@ -114,6 +117,7 @@ def controller_demonstrations(
             k,
             dispersions,
             None if init is None else init[k : k + chunk],
+            None if episode_seeds is None else np.asarray(episode_seeds)[k : k + chunk],
         )
         for k in range(0, n_episodes, chunk)
     ]

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from pd_core.controllers import ZemZevController
+from pd_core.dqn import demonstrations
 from pd_core.dqn.config import preset
 from pd_core.dqn.demonstrations import (
     build_demo_memory,
@@ -56,7 +57,8 @@ POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
 
 
 def test_recovery_demonstrations_start_on_the_students_own_paths() -> None:
-    starts, student = recovery_starts(POLICY, 8, 11, "delay")
+    starts, seeds, student = recovery_starts(POLICY, 8, 11, "delay")
+    np.testing.assert_array_equal(seeds, np.arange(11, 19))
     ro = rollout(load_policy(POLICY), 8, 11, keep_trajectories=8, dispersions="delay")
     assert student == ro.landed.mean()
     for s, path in zip(starts, ro.trajectories, strict=True):
@@ -68,6 +70,31 @@ def test_recovery_demonstrations_start_on_the_students_own_paths() -> None:
     first = np.flatnonzero(np.r_[True, steps.episode[1:] != steps.episode[:-1]])
     np.testing.assert_array_equal(steps.states[first], starts)  # the teacher flies on from there
     np.testing.assert_array_equal(steps.actions, ZemZevController().act_batch(steps.states))
+
+
+def test_recovery_starts_from_the_students_failures(monkeypatch) -> None:
+    monkeypatch.setattr(demonstrations, "FAILURE_SEARCH_CHUNK", 40)
+    # pd_dqn_best lands about half of `all`: 3 starts from any episode, 5 from failed ones
+    starts, seeds, student = recovery_starts(POLICY, 8, 11, "all", failed_share=0.6)
+    np.testing.assert_array_equal(seeds[:3], [11, 12, 13])
+    assert len(set(seeds[3:])) == 5 and min(seeds[3:]) >= 14 and 0.2 < student < 0.8
+    again = rollout(
+        load_policy(POLICY), 5, 0, keep_trajectories=5, dispersions="all", episode_seeds=seeds[3:]
+    )
+    assert not again.landed.any()  # each comes from an episode the student crashed
+    for s, path in zip(starts[3:], again.trajectories, strict=True):
+        assert np.min(np.abs(path[:-1] - s).max(axis=1)) == 0.0
+    steps, _, _ = recovery_steps(POLICY, "zemzev", 8, 11, "all", failed_share=0.6)
+    first = np.flatnonzero(np.r_[True, steps.episode[1:] != steps.episode[:-1]])
+    np.testing.assert_array_equal(steps.states[first], starts)
+
+
+def test_rollout_episode_seeds_fly_those_episodes() -> None:
+    ctl = ZemZevController()
+    picked = rollout(ctl, 3, 0, dispersions="all", episode_seeds=[7, 3, 20], chunk=2)
+    for k, s in enumerate((7, 3, 20)):
+        one = rollout(ctl, 1, s, dispersions="all")
+        np.testing.assert_array_equal(picked.final_states[k], one.final_states[0])
 
 
 def test_recovery_demonstrations_need_a_student() -> None:

@@ -91,6 +91,9 @@ class TrainConfig:
     """DAgger-style demonstrations: episodes of the (first) `controller` started from states that
     `init_policy` visits under `dispersions`, one drawn uniformly along each of its episodes, so
     the teacher shows how to recover from where the student goes (kept as demo_landed_only says)"""
+    recovery_failed_share: float = 0.0
+    """share of the recovery demonstrations started from episodes the student failed (searched
+    for among further episodes) instead of from any episode"""
     init_policy: str = ""
     """policy file (.pt with its .json) whose weights start the Q and target networks: fine-tuning
     (its network must match hidden/activation; "": random initialisation)"""
@@ -229,6 +232,10 @@ def check_config(cfg: TrainConfig) -> None:
     if cfg.scenario_sampling not in SCENARIO_SAMPLING:
         raise ValueError(
             f"scenario_sampling must be one of {SCENARIO_SAMPLING}, got {cfg.scenario_sampling!r}"
+        )
+    if not 0.0 <= cfg.recovery_failed_share <= 1.0:
+        raise ValueError(
+            f"recovery_failed_share must lie in [0, 1], got {cfg.recovery_failed_share!r}"
         )
     if not 0.0 <= cfg.scenario_uniform_share <= 1.0 or cfg.scenario_window < 1:
         raise ValueError(

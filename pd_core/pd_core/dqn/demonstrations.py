@@ -23,6 +23,10 @@ CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
 RECOVERY_SEED_OFFSET = 60_000_000
 """... and the student episodes whose states start the recovery demonstrations, disjoint again."""
+FAILURE_SEARCH_FACTOR = 50
+"""The student flies at most this many times the recovery episodes looking for its failures."""
+FAILURE_SEARCH_CHUNK = 2000
+"""... in batches of this many episodes (only the failed ones' trajectories are kept)."""
 
 
 class DemoTransitions(NamedTuple):
@@ -75,6 +79,7 @@ def controller_steps(
     dispersions: str = "",
     landed_only: bool = False,
     initial_states: np.ndarray | None = None,
+    episode_seeds: np.ndarray | None = None,
 ) -> tuple[PhysicalSteps, float]:
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
     env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
@@ -87,6 +92,7 @@ def controller_steps(
         dispersions=dispersions,
         initial_states=initial_states,
         workers=workers,
+        episode_seeds=episode_seeds,
     )
     keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
     steps = PhysicalSteps(
@@ -96,21 +102,43 @@ def controller_steps(
 
 
 def recovery_starts(
-    policy_path: str, n_episodes: int, seed: int, dispersions: str = ""
-) -> tuple[np.ndarray, float]:
-    """States (n_episodes, 7) the student policy visits: it flies episodes seed.. under
-    `dispersions` and one true state is drawn uniformly along each episode before touchdown.
-    Also the student's success rate."""
-    ro = rollout(
-        load_policy(policy_path),
-        n_episodes,
-        seed,
-        keep_trajectories=n_episodes,
-        dispersions=dispersions,
-    )
+    policy_path: str, n_episodes: int, seed: int, dispersions: str = "", failed_share: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """States (n_episodes, 7) the student policy visits, the env seed of the episode each came
+    from, and the student's success rate. The student flies episodes seed.. under `dispersions`
+    and one true state is drawn uniformly along each episode before touchdown. A `failed_share`
+    of the states comes from episodes it did not land instead (searched for among the episodes
+    that follow, up to FAILURE_SEARCH_FACTOR x n_episodes; several states per failed episode
+    when it fails less often than that): the teacher then shows the way out of the student's
+    own crashes, which uniform draws rarely visit once the student lands 99 %."""
+    student = load_policy(policy_path)
+    n_failed = round(failed_share * n_episodes) if failed_share > 0 else 0
+    n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)
-    starts = np.stack([p[rng.integers(0, len(p) - 1)] for p in ro.trajectories])
-    return starts, float(np.mean(ro.landed))
+    starts: list[np.ndarray] = []
+    seeds = list(range(seed, seed + n_uniform))
+    landed: list[np.ndarray] = []
+    if n_uniform:
+        ro = rollout(student, n_uniform, seed, keep_trajectories=n_uniform, dispersions=dispersions)
+        starts += [p[rng.integers(0, len(p) - 1)] for p in ro.trajectories]
+        landed.append(ro.landed)
+    failed: list[tuple[int, np.ndarray]] = []  # (env seed, trajectory)
+    first = seed + n_uniform
+    while n_failed and len(failed) < n_failed and first - seed < FAILURE_SEARCH_FACTOR * n_episodes:
+        ro = rollout(
+            student, FAILURE_SEARCH_CHUNK, first, dispersions=dispersions,
+            keep_trajectories=FAILURE_SEARCH_CHUNK,
+        )  # fmt: skip
+        failed += [(first + i, ro.trajectories[i]) for i in np.flatnonzero(~ro.landed)]
+        landed.append(ro.landed)
+        first += FAILURE_SEARCH_CHUNK
+    if n_failed and not failed:
+        raise ValueError(f"{policy_path} failed no episode of {first - seed} under {dispersions!r}")
+    for j in range(n_failed):
+        s, path = failed[j % len(failed)]
+        starts.append(path[rng.integers(0, len(path) - 1)])
+        seeds.append(s)
+    return np.stack(starts), np.array(seeds), float(np.mean(np.concatenate(landed)))
 
 
 def recovery_steps(
@@ -120,13 +148,18 @@ def recovery_steps(
     seed: int,
     dispersions: str = "",
     landed_only: bool = False,
+    failed_share: float = 0.0,
 ) -> tuple[PhysicalSteps, float, float]:
     """Teacher `name` flying on from states the student visits (DAgger-style demonstrations:
     the student's states, the teacher's actions, and the teacher's own transitions so the TD
-    loss has them too): the steps, the teacher's success rate from those states and the
-    student's."""
-    starts, student = recovery_starts(policy_path, n_episodes, seed, dispersions)
-    steps, teacher = controller_steps(name, n_episodes, seed, dispersions, landed_only, starts)
+    loss has them too), each in the episode (env seed: scenario, draws, gusts) the state came
+    from: the steps, the teacher's success rate from those states and the student's."""
+    starts, seeds, student = recovery_starts(
+        policy_path, n_episodes, seed, dispersions, failed_share
+    )
+    steps, teacher = controller_steps(
+        name, n_episodes, seed, dispersions, landed_only, starts, episode_seeds=seeds
+    )
     return steps, teacher, student
 
 
@@ -182,6 +215,7 @@ def build_demo_memory(
             seed,
             cfg.dispersions,
             cfg.demo_landed_only,
+            cfg.recovery_failed_share,
         )
         parts.append(demo_transitions(steps, cfg, reward_cfg))
         info["recovery"] = {
@@ -191,6 +225,7 @@ def build_demo_memory(
             "transitions": len(steps.actions),
             "success_rate": success,
             "student_success_rate": student,
+            "failed_share": cfg.recovery_failed_share,
             "landed_only": cfg.demo_landed_only,
         }
     if not parts:
