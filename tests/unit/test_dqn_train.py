@@ -15,7 +15,7 @@ from pd_core.dqn.train import Trainer, train
 from pd_core.evaluate import rollout, summarise
 
 torch.set_num_threads(1)
-SHIPPED = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
 
 
 def _small(tmp_path, name: str, **kw) -> TrainConfig:
@@ -137,12 +137,13 @@ def test_init_policy_starts_from_the_shipped_weights_and_refuses_another_shape(t
 
 
 def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path):
-    # from the shipped nominal policy, barely changed (lr 1e-7): it lands `nominal` and fails
-    # `all` about half the time
+    # from pd_dqn_best (the nominal-problem policy), barely changed (lr 1e-7): it lands
+    # `nominal` and fails `all` about half the time
     cfg = _small(
         tmp_path, "sf", seed=3, dispersions="nominal,all", scenario_sampling="failures",
         scenario_uniform_share=0.2, max_updates=1500, num_envs=32, pretrain_updates=0,
-        init_policy=SHIPPED, hidden=preset("best").hidden, epsilon0=0.0, lr=1e-7, lr_finetune=1e-7,
+        init_policy=NOMINAL_POLICY, hidden=preset("best").hidden, epsilon0=0.0,
+        lr=1e-7, lr_finetune=1e-7,
     )  # fmt: skip
     tr = Trainer(cfg, quiet=True)
     tr.run()
