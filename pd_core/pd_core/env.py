@@ -313,8 +313,7 @@ class PoweredDescentVectorEnv:
             return 0
         if self._probs is None:
             return int(rng.integers(len(self.scenarios)))
-        k = int(np.searchsorted(np.cumsum(self._probs), rng.random(), side="right"))
-        return min(k, len(self.scenarios) - 1)
+        return int(rng.choice(len(self.scenarios), p=self._probs))
 
     def _reset_one(self, i: int, initial_state: np.ndarray | None) -> None:
         rng = self._rngs[i]

@@ -112,7 +112,7 @@ def recovery_starts(
     when it fails less often than that): the teacher then shows the way out of the student's
     own crashes, which uniform draws rarely visit once the student lands 99 %."""
     student = load_policy(policy_path)
-    n_failed = round(failed_share * n_episodes) if failed_share > 0 else 0
+    n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)
     starts: list[np.ndarray] = []
