@@ -35,6 +35,7 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
+from pd_core.shield import ShieldParams
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -50,12 +51,20 @@ REACH_HEAD = ("out of reach", "success % of reachable")
 
 
 def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
-    """(actor, label) of a policy file, `controller:<name>` or a factory."""
+    """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies as its
+    metadata says (with the braking shield of `pd_core.shield` if it asks for it); `bare:<file>`
+    flies the network alone, `shield:<file>` behind the default shield."""
     if callable(spec):
         return spec(), getattr(spec, "__name__", "agent")
     if spec.startswith("controller:"):
         name = spec.split(":", 1)[1]
         return make_controller(name), f"controller {name}"
+    if spec.startswith("bare:"):
+        return load_policy(spec[5:], use_shield=False), Path(spec[5:]).stem
+    if spec.startswith("shield:"):
+        policy = load_policy(spec[7:])
+        policy.shield = policy.shield or ShieldParams()
+        return policy, Path(spec[7:]).stem
     return load_policy(spec), Path(spec).stem
 
 

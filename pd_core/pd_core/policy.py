@@ -19,6 +19,7 @@ import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, N_ACTIONS_PER_AXIS, RL_THRUST, STATE_SCALE, ThrustLimits
+from pd_core.shield import ShieldParams, shield_actions
 from pd_core.state import check_state
 
 FORMAT_VERSION = 1
@@ -92,7 +93,8 @@ def _close(a: Any, b: Any) -> bool:
 
 
 class Policy:
-    """Greedy policy of a trained Q-network, on physical states [x, y, z, vx, vy, vz, m] (SI)."""
+    """Greedy policy of a trained Q-network, on physical states [x, y, z, vx, vy, vz, m] (SI),
+    behind the braking shield (`pd_core.shield`) when its metadata asks for one (`shield`)."""
 
     def __init__(self, network: Any, metadata: dict[str, Any]) -> None:
         self.network = network.eval()
@@ -112,6 +114,10 @@ class Policy:
             if hasattr(m, "weight")
         ]
         self._act_fn = np.tanh if metadata["network"]["activation"] == "tanh" else _relu
+        raw = metadata.get("shield")
+        self.shield: ShieldParams | None = None if not raw else ShieldParams.from_dict(raw)
+        self.shield_fired = 0
+        """steps on which the shield overrode the network (counted since loading)"""
 
     def q_values(self, state: np.ndarray) -> np.ndarray:
         """Action values (..., n_actions) of physical states (..., 7); ValueError if invalid."""
@@ -124,11 +130,18 @@ class Policy:
 
     def act(self, state: np.ndarray) -> int:
         """Greedy action index for one physical state (7,)."""
-        return int(np.argmax(self.q_values(np.asarray(state, dtype=float).reshape(7))))
+        return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
-        """Greedy actions (B,) for physical states (B, 7)."""
-        return np.argmax(self.q_values(states), axis=-1)
+        """Greedy actions (B,) for physical states (B, 7), shielded if the file says so."""
+        greedy = np.argmax(self.q_values(states), axis=-1)
+        if self.shield is None:
+            return greedy
+        shielded, fired = shield_actions(
+            greedy, np.reshape(states, (-1, 7)), self.actions, self.shield
+        )
+        self.shield_fired += int(fired.sum())
+        return shielded.reshape(np.shape(greedy))
 
     def thrust(self, action: int) -> np.ndarray:
         """Thrust (3,) in N of an action index; ValueError if out of range."""
@@ -187,9 +200,10 @@ def _weights_mismatch(state: dict[str, Any], want: dict[str, Any]) -> str | None
     return None
 
 
-def load_policy(path: str | Path) -> Policy:
+def load_policy(path: str | Path, use_shield: bool = True) -> Policy:
     """Load `<name>.pt` + `<name>.json`; PolicyLoadError naming the file and what is wrong
-    (one line; never advice to lower the safety of the load)."""
+    (one line; never advice to lower the safety of the load). `use_shield=False` flies the bare
+    network even when the metadata asks for the braking shield."""
     from pd_core.dqn.network import QNetwork  # imports torch: optional heavy dependency
 
     pt, js = paths_for(path)
@@ -233,4 +247,10 @@ def load_policy(path: str | Path) -> Policy:
     if why is not None:
         raise PolicyLoadError(f"{pt}: cannot load weights: {why} (network described in {js})")
     net.load_state_dict(state)
-    return Policy(net, meta)
+    try:
+        policy = Policy(net, meta)
+    except (TypeError, ValueError) as exc:
+        raise PolicyLoadError(f"{js}: bad shield settings: {_one_line(exc)}") from exc
+    if not use_shield:
+        policy.shield = None
+    return policy

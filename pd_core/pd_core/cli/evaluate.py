@@ -72,7 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=[],
         metavar="NAME=MODEL",
         help="other policies (or controllers as NAME=controller:zemzev) flown on the same "
-        "episodes: Table 7 blocks side by side, Figs. 5 and 7",
+        "episodes: Table 7 blocks side by side, Figs. 5 and 7. A file flies as its metadata "
+        "says (braking shield or not); bare:FILE flies the network alone, shield:FILE behind "
+        "the default braking shield",
     )
     p.add_argument(
         "--training-log",

@@ -9,17 +9,24 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.dqn.network import QNetwork
+from pd_core.shield import ShieldParams, shield_actions
 from pd_core.state import scale_state
 
 
 class NetActor:
-    """Greedy actions of a Q-network on physical states (`pd_core.evaluate.Actor`)."""
+    """Greedy actions of a Q-network on physical states (`pd_core.evaluate.Actor`), behind the
+    braking shield if given one."""
 
-    def __init__(self, net: QNetwork) -> None:
+    def __init__(self, net: QNetwork, shield: ShieldParams | None = None) -> None:
         self.net = net
+        self.shield = shield
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             q = self.net(torch.from_numpy(scale_state(states)))
-        return q.argmax(dim=1).numpy()
+        greedy = q.argmax(dim=1).numpy()
+        if self.shield is None:
+            return greedy
+        return shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield)[0]

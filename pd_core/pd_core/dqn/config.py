@@ -94,6 +94,10 @@ class TrainConfig:
     recovery_failed_share: float = 0.0
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
+    shield: bool = False
+    """fly behind the braking shield of pd_core.shield while training (the replay stores the
+    action the shield let through), evaluate with it, and write it into the saved policies'
+    metadata so every user of the file flies with it"""
     init_policy: str = ""
     """policy file (.pt with its .json) whose weights start the Q and target networks: fine-tuning
     (its network must match hidden/activation; "": random initialisation)"""

@@ -16,6 +16,7 @@ from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
 from pd_core.evaluate import rollout
 from pd_core.policy import load_policy
 from pd_core.reward import reward as shaped_reward
+from pd_core.shield import ShieldParams
 from pd_core.state import scale_state
 from pd_core.teacher_demos import controller_demonstrations
 
@@ -102,7 +103,12 @@ def controller_steps(
 
 
 def recovery_starts(
-    policy_path: str, n_episodes: int, seed: int, dispersions: str = "", failed_share: float = 0.0
+    policy_path: str,
+    n_episodes: int,
+    seed: int,
+    dispersions: str = "",
+    failed_share: float = 0.0,
+    shield: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """States (n_episodes, 7) the student policy visits, the env seed of the episode each came
     from, and the student's success rate. The student flies episodes seed.. under `dispersions`
@@ -110,8 +116,11 @@ def recovery_starts(
     of the states comes from episodes it did not land instead (searched for among the episodes
     that follow, up to FAILURE_SEARCH_FACTOR x n_episodes; several states per failed episode
     when it fails less often than that): the teacher then shows the way out of the student's
-    own crashes, which uniform draws rarely visit once the student lands 99 %."""
+    own crashes, which uniform draws rarely visit once the student lands 99 %. `shield`: the
+    student flies behind the braking shield (pd_core.shield) even if its file has none."""
     student = load_policy(policy_path)
+    if shield and student.shield is None:
+        student.shield = ShieldParams()
     n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)
@@ -149,13 +158,14 @@ def recovery_steps(
     dispersions: str = "",
     landed_only: bool = False,
     failed_share: float = 0.0,
+    shield: bool = False,
 ) -> tuple[PhysicalSteps, float, float]:
     """Teacher `name` flying on from states the student visits (DAgger-style demonstrations:
     the student's states, the teacher's actions, and the teacher's own transitions so the TD
     loss has them too), each in the episode (env seed: scenario, draws, gusts) the state came
     from: the steps, the teacher's success rate from those states and the student's."""
     starts, seeds, student = recovery_starts(
-        policy_path, n_episodes, seed, dispersions, failed_share
+        policy_path, n_episodes, seed, dispersions, failed_share, shield
     )
     steps, teacher = controller_steps(
         name, n_episodes, seed, dispersions, landed_only, starts, episode_seeds=seeds
@@ -216,6 +226,7 @@ def build_demo_memory(
             cfg.dispersions,
             cfg.demo_landed_only,
             cfg.recovery_failed_share,
+            cfg.shield,
         )
         parts.append(demo_transitions(steps, cfg, reward_cfg))
         info["recovery"] = {

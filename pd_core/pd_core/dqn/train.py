@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import REWARD, STATE_SCALE, RewardConfig
 from pd_core.controllers import make_controller
 from pd_core.dqn.actor import NetActor
@@ -40,6 +41,7 @@ from pd_core.env import make_vector_env
 from pd_core.evaluate import rollout, summarise
 from pd_core.plots import training_curves
 from pd_core.policy import code_version, load_policy, save_policy
+from pd_core.shield import ShieldParams, shield_actions
 from pd_core.state import scale_state
 
 EvalCallback = Callable[[dict[str, float]], None]
@@ -235,7 +237,7 @@ class Trainer:
     def evaluate(self, episodes: int | None = None, seed: int | None = None) -> dict[str, float]:
         """Greedy evaluation on seeded episodes (the periodic one of `run`)."""
         ro = rollout(
-            NetActor(self.agent.q),
+            NetActor(self.agent.q, ShieldParams() if self.cfg.shield else None),
             episodes or self.cfg.eval_episodes,
             self.cfg.eval_seed if seed is None else seed,
             dispersions=self.cfg.dispersions,
@@ -263,6 +265,8 @@ class Trainer:
                 **(extra or {}),
             },
         )
+        if self.cfg.shield:
+            meta["shield"] = ShieldParams().to_dict()
         return save_policy(self.run_dir / name, self.agent.q, meta)
 
     def run(self) -> dict[str, Any]:
@@ -361,6 +365,10 @@ class Trainer:
         """One batched epsilon-greedy step: n-step transitions into the replay, episode rows."""
         cfg = self.cfg
         actions = self.agent.act(self.obs, eps, self.rng)
+        if cfg.shield:
+            actions, _ = shield_actions(
+                actions, self.obs / STATE_SCALE, DEFAULT_ACTIONS, ShieldParams()
+            )
         nobs, r, term, trunc, info = self.env.step(actions)
         self.c.env_steps += cfg.num_envs
         self.ep_return += r

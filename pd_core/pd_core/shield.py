@@ -1,0 +1,85 @@
+"""Braking shield: a runtime-assurance filter between a learned policy and the thrusters (ours).
+
+A Q-network is trusted only where it was trained. Under dispersions its worst failures are not
+near misses but landers that keep falling at 90-100 m/s until the thrust left can no longer stop
+them (a 2200 kg lander with 5 % less thrust has 1.9 m/s^2 of net braking: 2.5 km to stop from
+98 m/s). The shield overrides only the vertical thrust, and only when the observed state is
+descending faster than the fastest speed from which a fraction `thrust_margin` of full vertical
+thrust still brakes to `land_speed_mps` at the pad:
+
+    v_max(z, m) = sqrt(v_land^2 + 2 z (margin * T_z,max / m - g)).
+
+It then commands full vertical thrust (the horizontal levels stay the policy's). Both numbers are
+the ZEM/ZEV teacher's (`ZemZevParams.brake_margin`, `land_speed_mps`): the shield is the
+teacher's own braking limit, not a value fitted to a campaign. A lander that cannot hover
+(margin * T_z,max < m g) is always shielded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from pd_core.actions import ActionSpace
+from pd_core.config import GRAVITY_MPS2
+
+
+@dataclass(frozen=True)
+class ShieldParams:
+    """Where the shield fires (see the module docstring)."""
+
+    thrust_margin: float = 0.9
+    """fraction of full vertical thrust the braking limit counts on (ZemZevParams.brake_margin:
+    room for a 5 % thrust shortfall, a 2 deg misalignment and 300 N gusts)"""
+    land_speed_mps: float = 0.5
+    """descent speed the limit brakes to at the pad (ZemZevParams.land_speed_mps)"""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.thrust_margin <= 1.0:
+            raise ValueError(f"shield thrust_margin must be in (0, 1], got {self.thrust_margin}")
+        if not 0.0 <= self.land_speed_mps < 2.0:
+            raise ValueError(f"shield land_speed_mps must be in [0, 2), got {self.land_speed_mps}")
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ShieldParams:
+        unknown = set(d) - {"thrust_margin", "land_speed_mps"}
+        if unknown:
+            raise ValueError(f"unknown shield setting(s): {', '.join(sorted(unknown))}")
+        return cls(**{k: float(v) for k, v in d.items()})
+
+
+def max_descent_speed_mps(
+    altitude_m: np.ndarray, mass_kg: np.ndarray, max_vertical_thrust_n: float, p: ShieldParams
+) -> np.ndarray:
+    """Fastest descent speed (m/s, >= 0) from which the margin thrust still brakes to the land
+    speed by the pad; the land speed itself where the lander cannot brake at all."""
+    g = float(-np.asarray(GRAVITY_MPS2)[2])
+    a_net = p.thrust_margin * max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) - g
+    z = np.maximum(np.asarray(altitude_m, dtype=float), 0.0)
+    return np.sqrt(p.land_speed_mps**2 + 2.0 * np.maximum(a_net, 0.0) * z)
+
+
+def shield_mask(states: np.ndarray, max_vertical_thrust_n: float, p: ShieldParams) -> np.ndarray:
+    """(B,) True where the (observed) physical states (B, 7) descend beyond the braking limit."""
+    s = np.atleast_2d(states)
+    limit = max_descent_speed_mps(s[:, 2], s[:, 6], max_vertical_thrust_n, p)
+    return -s[:, 5] > limit
+
+
+def shield_actions(
+    actions: np.ndarray, states: np.ndarray, space: ActionSpace, p: ShieldParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """(actions with full vertical thrust where `shield_mask`, the mask) for actions (B,)
+    chosen in physical states (B, 7)."""
+    a = np.asarray(actions, dtype=np.int64).reshape(-1)
+    fire = shield_mask(states, float(space.limits.hi[2]), p)
+    if not fire.any():
+        return a, fire
+    levels = space.level_table[a].copy()
+    levels[fire, 2] = space.n_per_axis[2] - 1
+    return space.levels_to_action(levels).astype(np.int64), fire
