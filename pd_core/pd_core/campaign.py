@@ -35,7 +35,6 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
-from pd_core.shield import ShieldParams
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -59,12 +58,10 @@ def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
     if spec.startswith("controller:"):
         name = spec.split(":", 1)[1]
         return make_controller(name), f"controller {name}"
-    if spec.startswith("bare:"):
-        return load_policy(spec[5:], use_shield=False), Path(spec[5:]).stem
-    if spec.startswith("shield:"):
-        policy = load_policy(spec[7:])
-        policy.shield = policy.shield or ShieldParams()
-        return policy, Path(spec[7:]).stem
+    for prefix, mode in (("bare:", "off"), ("shield:", "on")):
+        if spec.startswith(prefix):
+            path = spec[len(prefix) :]
+            return load_policy(path, shield=mode), Path(path).stem
     return load_policy(spec), Path(spec).stem
 
 

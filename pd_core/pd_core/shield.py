@@ -3,13 +3,15 @@
 A Q-network is trusted only where it was trained. Under dispersions its worst failures are not
 near misses but landers that keep falling at 90-100 m/s until the thrust left can no longer stop
 them (a 2200 kg lander with 5 % less thrust has 1.9 m/s^2 of net braking: 2.5 km to stop from
-98 m/s). The shield overrides only the vertical thrust, and only when the observed state is
-descending faster than the fastest speed from which a fraction `thrust_margin` of full vertical
+98 m/s). The shield overrides only the vertical thrust, and only when the observed state
+would descend faster than the fastest speed from which a fraction `thrust_margin` of full vertical
 thrust still brakes to `land_speed_mps` at the pad:
 
     v_max(z, m) = sqrt(v_land^2 + 2 z (margin * T_z,max / m - g)).
 
-It then commands full vertical thrust (the horizontal levels stay the policy's). Both numbers are
+It fires when the policy's own vertical command (counted at the margin) would put the lander
+beyond that limit one step later, and then commands full vertical thrust (the horizontal levels
+stay the policy's). Both numbers are
 the ZEM/ZEV teacher's (`ZemZevParams.brake_margin`, `land_speed_mps`): the shield is the
 teacher's own braking limit, not a value fitted to a campaign. A lander that cannot hover
 (margin * T_z,max < m g) is always shielded.
@@ -23,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from pd_core.actions import ActionSpace
-from pd_core.config import GRAVITY_MPS2
+from pd_core.config import DT_S, GRAVITY_MPS2
 
 
 @dataclass(frozen=True)
@@ -64,11 +66,19 @@ def max_descent_speed_mps(
     return np.sqrt(p.land_speed_mps**2 + 2.0 * np.maximum(a_net, 0.0) * z)
 
 
-def shield_mask(states: np.ndarray, max_vertical_thrust_n: float, p: ShieldParams) -> np.ndarray:
-    """(B,) True where the (observed) physical states (B, 7) descend beyond the braking limit."""
+def shield_mask(
+    states: np.ndarray, vertical_thrust_n: np.ndarray, max_vertical_thrust_n: float, p: ShieldParams
+) -> np.ndarray:
+    """(B,) True where the (observed) physical states (B, 7), after one step of the commanded
+    vertical thrust (B,) at the margin, would descend beyond the braking limit. Looking one
+    step ahead matters: a shield that fired only once the limit is crossed could never catch
+    up, since braking at the margin thrust merely keeps the excess speed."""
     s = np.atleast_2d(states)
-    limit = max_descent_speed_mps(s[:, 2], s[:, 6], max_vertical_thrust_n, p)
-    return -s[:, 5] > limit
+    g = float(-np.asarray(GRAVITY_MPS2)[2])
+    a_z = p.thrust_margin * np.asarray(vertical_thrust_n, dtype=float) / s[:, 6] - g
+    vz = s[:, 5] + a_z * DT_S
+    z = s[:, 2] + (s[:, 5] + 0.5 * a_z * DT_S) * DT_S
+    return -vz > max_descent_speed_mps(z, s[:, 6], max_vertical_thrust_n, p)
 
 
 def shield_actions(
@@ -77,7 +87,7 @@ def shield_actions(
     """(actions with full vertical thrust where `shield_mask`, the mask) for actions (B,)
     chosen in physical states (B, 7)."""
     a = np.asarray(actions, dtype=np.int64).reshape(-1)
-    fire = shield_mask(states, float(space.limits.hi[2]), p)
+    fire = shield_mask(states, space.table_n[a, 2], float(space.limits.hi[2]), p)
     if not fire.any():
         return a, fire
     levels = space.level_table[a].copy()

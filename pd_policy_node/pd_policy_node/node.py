@@ -28,7 +28,7 @@ from rclpy.node import Node
 
 import pd_core
 from pd_core.config import TABLE3
-from pd_core.policy import PolicyLoadError
+from pd_core.policy import SHIELD_MODES, PolicyLoadError
 from pd_core.state import check_state
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_ros_common import names, params, qos
@@ -56,13 +56,22 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         f"the shipped model: ${MODEL_ENV} if set, else $PD_ROOT/{SHIPPED_MODEL} (PD_ROOT is "
         f"set by env.sh), else {SHIPPED_MODEL} in the source tree the package runs from.",
     ),
+    "shield": (
+        "file",
+        "Braking shield of the 'dqn' controller (pd_core.shield: full vertical thrust when the "
+        "lander descends faster than it can still brake): 'file' as the policy file's metadata "
+        "says, 'on' always, 'off' never (the bare network).",
+    ),
     "stats_period_s": (
         10.0,
         "Log decision-time statistics (p50/p99/max of the state->command callback) every this "
         "many seconds; 0 = only at shutdown.",
     ),
 }
-CHECKS: dict[str, params.Check] = {"stats_period_s": params.at_least(0.0)}
+CHECKS: dict[str, params.Check] = {
+    "stats_period_s": params.at_least(0.0),
+    "shield": params.one_of(SHIELD_MODES),
+}
 LOG_FIRST = 20  # per kind of problem, log this many one by one, then every 100th
 
 
@@ -80,15 +89,16 @@ def default_model_path() -> Path:
     return candidates[0]
 
 
-def load_controller(name: str, model_path: str) -> tuple[Any, str]:
+def load_controller(name: str, model_path: str, shield: str = "file") -> tuple[Any, str]:
     """(controller with act/thrust, description); PolicyLoadError if it cannot be made."""
     if name == DQN:
         path = Path(model_path) if model_path else default_model_path()
-        policy = pd_core.load_policy(path)
+        policy = pd_core.load_policy(path, shield=shield)
         meta = policy.metadata
+        guard = "no braking shield" if policy.shield is None else f"braking shield {policy.shield}"
         return policy, (
             f"{path} (network {meta['network']['hidden']}, {policy.actions.n} actions, "
-            f"code {meta.get('code_version', '?')})"
+            f"code {meta.get('code_version', '?')}, {guard})"
         )
     # Optional heavy dependency (the MPC teachers import the OCP solvers): only when asked for.
     from pd_core.controllers import make_controller
@@ -106,11 +116,12 @@ class PolicyNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = params.declare(self, PARAMETERS, CHECKS)
         self.controller_name = p["controller"]
-        self.policy, described = load_controller(p["controller"], p["model_path"])
+        self.policy, described = load_controller(p["controller"], p["model_path"], p["shield"])
         if self.controller_name == DQN:
             # Warm up numpy so the first real state is answered as fast as the rest (not the
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).
             self.policy.act((TABLE3.lo + TABLE3.hi) / 2)
+            self.policy.shield_fired = 0
 
         self._times: deque[float] = deque(maxlen=100_000)
         self._since_log: list[float] = []
@@ -200,9 +211,11 @@ class PolicyNode(Node):
         )
 
     def _counts(self) -> str:
+        shielded = getattr(self.policy, "shield_fired", 0)
         return (
-            f"{self.answered} answered, {self.repeats} repeated, {self.invalid} invalid, "
-            f"{self.gaps} missing (step gaps), {self.lost} lost (DDS) states in all"
+            f"{self.answered} answered ({shielded} by the braking shield), {self.repeats} "
+            f"repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), {self.lost} "
+            "lost (DDS) states in all"
         )
 
     def _log_stats(self) -> None:

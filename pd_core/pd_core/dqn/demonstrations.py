@@ -16,7 +16,6 @@ from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
 from pd_core.evaluate import rollout
 from pd_core.policy import load_policy
 from pd_core.reward import reward as shaped_reward
-from pd_core.shield import ShieldParams
 from pd_core.state import scale_state
 from pd_core.teacher_demos import controller_demonstrations
 
@@ -118,9 +117,7 @@ def recovery_starts(
     when it fails less often than that): the teacher then shows the way out of the student's
     own crashes, which uniform draws rarely visit once the student lands 99 %. `shield`: the
     student flies behind the braking shield (pd_core.shield) even if its file has none."""
-    student = load_policy(policy_path)
-    if shield and student.shield is None:
-        student.shield = ShieldParams()
+    student = load_policy(policy_path, shield="on" if shield else "file")
     n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)

@@ -1,0 +1,119 @@
+"""Braking shield: its limit is the braking law it claims, it only touches the vertical axis, it
+saves a policy that never brakes, and policy files, pd-eval specs and training carry it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.campaign import load_actor
+from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
+from pd_core.dqn.network import QNetwork
+from pd_core.dynamics import step
+from pd_core.policy import PolicyLoadError, load_policy, save_policy
+from pd_core.shield import ShieldParams, max_descent_speed_mps, shield_actions, shield_mask
+
+torch.set_num_threads(1)
+G = -GRAVITY_MPS2[2]
+TZ = RL_THRUST.max_n[2]
+P = ShieldParams()
+
+
+def test_limit_is_the_margin_braking_law():
+    # 2000 kg: 0.9 * 13 kN / 2000 kg - g = 2.13 m/s^2 of net braking
+    a = 0.9 * TZ / 2000.0 - G
+    z = np.array([0.0, 10.0, 1000.0])
+    want = np.sqrt(0.5**2 + 2 * a * z)
+    np.testing.assert_allclose(max_descent_speed_mps(z, np.full(3, 2000.0), TZ, P), want)
+    assert max_descent_speed_mps(np.array([1000.0]), np.array([2000.0]), TZ, P)[0] == (
+        pytest.approx(65.27, abs=0.01)
+    )
+    # a lander too heavy to hover on the margin thrust may descend no faster than the land speed
+    heavy = max_descent_speed_mps(np.array([2000.0]), np.array([3500.0]), TZ, P)
+    np.testing.assert_allclose(heavy, [0.5])
+
+
+def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
+    rng = np.random.default_rng(0)
+    n = 400
+    s = np.zeros((n, 7))
+    s[:, 0:2] = rng.uniform(-500, 500, (n, 2))
+    s[:, 2] = rng.uniform(0, 2500, n)
+    s[:, 3:5] = rng.uniform(-30, 30, (n, 2))
+    s[:, 5] = rng.uniform(-110, 5, n)
+    s[:, 6] = rng.uniform(1700, 2200, n)
+    acts = rng.integers(0, DEFAULT_ACTIONS.n, n)
+    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, P)
+    # one step ahead under the commanded vertical thrust, counted at the margin
+    az = 0.9 * DEFAULT_ACTIONS.thrust(acts)[:, 2] / s[:, 6] - G
+    z1 = s[:, 2] + s[:, 5] * DT_S + 0.5 * az * DT_S**2
+    limit = max_descent_speed_mps(z1, s[:, 6], TZ, P)
+    np.testing.assert_array_equal(fired, -(s[:, 5] + az * DT_S) > limit)
+    np.testing.assert_array_equal(fired, shield_mask(s, DEFAULT_ACTIONS.thrust(acts)[:, 2], TZ, P))
+    assert 0.2 < fired.mean() < 0.8  # the draw exercises both branches
+    before, after = DEFAULT_ACTIONS.level_table[acts], DEFAULT_ACTIONS.level_table[out]
+    np.testing.assert_array_equal(after[:, 0:2], before[:, 0:2])  # horizontal untouched
+    np.testing.assert_array_equal(after[fired, 2], 2)  # full vertical thrust
+    np.testing.assert_array_equal(out[~fired], acts[~fired])
+
+
+@pytest.mark.parametrize("thrust_factor", [1.0, 0.9])
+def test_a_policy_that_never_brakes_touches_down_softly_behind_the_shield(thrust_factor):
+    """Free fall from 2 km at 90 m/s; the engines deliver `thrust_factor` of the command (0.9:
+    exactly the shield's margin). Without the shield it hits the ground at > 100 m/s."""
+    free_fall = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 0]))  # zero thrust
+    touchdown = {}
+    for shielded in (True, False):
+        s = np.array([0.0, 0.0, 2000.0, 0.0, 0.0, -90.0, 2100.0])
+        while s[2] > 0.0:
+            a = np.array([free_fall])
+            if shielded:
+                a, _ = shield_actions(a, s[None], DEFAULT_ACTIONS, P)
+            thrust = thrust_factor * DEFAULT_ACTIONS.thrust(a)[0]
+            s = step(s, thrust, np.zeros(3), DT_S)
+        touchdown[shielded] = -s[5]
+    assert touchdown[False] > 100.0
+    # one 0.2 s step of free fall (0.74 m/s) above the 0.5 m/s the limit brakes to
+    assert touchdown[True] < 0.5 + G * DT_S + 0.1
+
+
+@pytest.fixture()
+def files(tmp_path):
+    torch.manual_seed(3)
+    net = QNetwork(7, 147, (16, 16), "tanh")
+    bare = save_policy(tmp_path / "bare", net, {})
+    shielded = save_policy(tmp_path / "sh", net, {"shield": {"thrust_margin": 0.8}})
+    return bare, shielded
+
+
+def test_policy_files_fly_behind_the_shield_their_metadata_asks_for(files):
+    bare, shielded = files
+    assert load_policy(bare).shield is None
+    assert load_policy(shielded).shield == ShieldParams(thrust_margin=0.8)
+    assert load_policy(shielded, shield="off").shield is None
+    assert load_policy(bare, shield="on").shield == ShieldParams()
+    falling = np.array([[0.0, 0.0, 500.0, 0.0, 0.0, -90.0, 2000.0]])
+    p = load_policy(shielded)
+    a = p.act_batch(falling)
+    assert DEFAULT_ACTIONS.level_table[a[0], 2] == 2 and p.shield_fired == 1
+    assert p.act(falling[0]) == a[0] and p.shield_fired == 2
+    assert load_actor(f"bare:{shielded}")[0].shield is None
+    assert load_actor(f"shield:{bare}")[0].shield == ShieldParams()
+    with pytest.raises(ValueError, match="shield must be one of file, on, off"):
+        load_policy(bare, shield="maybe")
+
+
+def test_bad_shield_metadata_is_refused_in_one_line(files):
+    _, shielded = files
+    js = shielded.with_suffix(".json")
+    meta = json.loads(js.read_text())
+    for bad, says in (({"thrust_margin": 1.5}, "thrust_margin must be in"), ({"gain": 1}, "gain")):
+        meta["shield"] = bad
+        js.write_text(json.dumps(meta))
+        with pytest.raises(PolicyLoadError, match=says) as err:
+            load_policy(shielded)
+        assert "\n" not in str(err.value) and "bad shield settings" in str(err.value)
