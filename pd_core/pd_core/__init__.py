@@ -10,8 +10,8 @@ from typing import Any
 __version__ = "0.1.0"
 
 
-def load_policy(path: Any) -> Any:
+def load_policy(path: Any, shield: str = "file") -> Any:
     """Load a trained DQN policy file; see `pd_core.policy.load_policy`."""
     from pd_core.policy import load_policy as _load
 
-    return _load(path)
+    return _load(path, shield=shield)

@@ -58,7 +58,7 @@ def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
     if spec.startswith("controller:"):
         name = spec.split(":", 1)[1]
         return make_controller(name), f"controller {name}"
-    for prefix, mode in (("bare:", "off"), ("shield:", "on")):
+    for prefix, mode in (("bare:", "never"), ("shield:", "always")):
         if spec.startswith(prefix):
             path = spec[len(prefix) :]
             return load_policy(path, shield=mode), Path(path).stem

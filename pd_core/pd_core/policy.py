@@ -23,7 +23,7 @@ from pd_core.shield import ShieldParams, shield_actions
 from pd_core.state import check_state
 
 FORMAT_VERSION = 1
-SHIELD_MODES = ("file", "on", "off")
+SHIELD_MODES = ("file", "always", "never")
 """`load_policy(shield=...)`: as the metadata says, always, never"""
 
 
@@ -205,8 +205,8 @@ def _weights_mismatch(state: dict[str, Any], want: dict[str, Any]) -> str | None
 def load_policy(path: str | Path, shield: str = "file") -> Policy:
     """Load `<name>.pt` + `<name>.json`; PolicyLoadError naming the file and what is wrong
     (one line; never advice to lower the safety of the load). `shield` (SHIELD_MODES): fly
-    behind the braking shield if the metadata asks for it ("file"), always ("on": the file's
-    settings or the defaults), or never ("off": the bare network)."""
+    behind the braking shield if the metadata asks for it ("file"), always ("always": the file's
+    settings or the defaults), or never ("never": the bare network)."""
     if shield not in SHIELD_MODES:
         raise ValueError(f"shield must be one of {', '.join(SHIELD_MODES)}, got {shield!r}")
     from pd_core.dqn.network import QNetwork  # imports torch: optional heavy dependency
@@ -256,8 +256,8 @@ def load_policy(path: str | Path, shield: str = "file") -> Policy:
         policy = Policy(net, meta)
     except (TypeError, ValueError) as exc:
         raise PolicyLoadError(f"{js}: bad shield settings: {_one_line(exc)}") from exc
-    if shield == "off":
+    if shield == "never":
         policy.shield = None
-    elif shield == "on":
+    elif shield == "always":
         policy.shield = policy.shield or ShieldParams()
     return policy

@@ -60,7 +60,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "file",
         "Braking shield of the 'dqn' controller (pd_core.shield: full vertical thrust when the "
         "lander descends faster than it can still brake): 'file' as the policy file's metadata "
-        "says, 'on' always, 'off' never (the bare network).",
+        "says, 'always', or 'never' (the bare network; YAML reads on/off as booleans).",
     ),
     "stats_period_s": (
         10.0,

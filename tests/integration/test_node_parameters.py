@@ -29,6 +29,7 @@ def _run_until_exit(tmp_path, package: str, params: dict) -> tuple[int, str]:
         ("pd_sim_node", {"rate_hz": "abc"}, 2, "parameter rate_hz: expected a double"),
         ("pd_policy_node", {"stats_period_s": -1}, 2, "parameter stats_period_s: must be >= 0"),
         ("pd_policy_node", {"controller": "nope"}, 1, "controller 'nope': unknown controller"),
+        ("pd_policy_node", {"shield": "maybe"}, 2, "parameter shield: must be one of file, always"),
     ],
 )
 def test_bad_start_up_parameter_is_one_line(tmp_path, package, params, code, says):

@@ -1,5 +1,6 @@
 """pd_policy_node's `controller` parameter: a reference controller of pd_core flies the lander over
-ROS in lockstep, exactly as it flies offline (issue 10 item 5)."""
+ROS in lockstep, exactly as it flies offline (issue 10 item 5); so does the DQN behind the braking
+shield (`shield` parameter)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ from helpers import ProcessSet
 
 from pd_core.controllers import CONTROLLERS, make_controller
 from pd_core.env import PoweredDescentEnv
+from pd_core.policy import load_policy
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
+from pd_policy_node.node import default_model_path
 from pd_ros_common import qos
 from pd_ros_common.convert import final_state, reset_request
 
@@ -45,9 +48,11 @@ class Loop:
         self.reset_cli = self.node.create_client(ResetEpisode, "/sim/reset")
         assert spin_until(self.reset_cli.service_is_ready, 20.0)
 
-    def fly(self, procs: ProcessSet, controller: str, seed: int) -> tuple[int, object]:
+    def fly(
+        self, procs: ProcessSet, controller: str, seed: int, **params: str
+    ) -> tuple[int, object]:
         """Start a policy node with `controller` (the only one) and an episode; (episode, node)."""
-        policy = procs.node("pd_policy_node", {"controller": controller}, name=controller)
+        policy = procs.node("pd_policy_node", {"controller": controller, **params}, name=controller)
         assert policy.wait_log("policy ready", START_S), policy.log()
         n = self.node
         assert self.spin_until(
@@ -64,7 +69,10 @@ class Loop:
 
 
 def offline(controller: str, seed: int, steps: int | None = None) -> list[np.ndarray]:
-    ctl = make_controller(controller)
+    if controller == "dqn":
+        ctl = load_policy(default_model_path(), shield="always")
+    else:
+        ctl = make_controller(controller)
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed)
     states = [info["state"]]
@@ -83,6 +91,20 @@ def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until):
     assert policy.stop() == 0, policy.log()
     result = next(r for r in loop.results if r.episode == episode)
     expected = offline("zemzev", 8)
+    assert result.landed, result.reason
+    assert result.steps == len(expected) - 1 and result.rejected_commands == 0
+    np.testing.assert_array_equal(final_state(result), expected[-1])
+
+
+def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
+    loop = Loop(make_node, spin_until)
+    episode, policy = loop.fly(sim, "dqn", seed=11, shield="always")
+    assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
+    assert policy.stop() == 0, policy.log()
+    assert "braking shield ShieldParams(thrust_margin=0.9" in policy.log(), policy.log()
+    assert "by the braking shield" in policy.log(), policy.log()
+    result = next(r for r in loop.results if r.episode == episode)
+    expected = offline("dqn", 11)
     assert result.landed, result.reason
     assert result.steps == len(expected) - 1 and result.rejected_commands == 0
     np.testing.assert_array_equal(final_state(result), expected[-1])

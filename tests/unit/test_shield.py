@@ -94,8 +94,8 @@ def test_policy_files_fly_behind_the_shield_their_metadata_asks_for(files):
     bare, shielded = files
     assert load_policy(bare).shield is None
     assert load_policy(shielded).shield == ShieldParams(thrust_margin=0.8)
-    assert load_policy(shielded, shield="off").shield is None
-    assert load_policy(bare, shield="on").shield == ShieldParams()
+    assert load_policy(shielded, shield="never").shield is None
+    assert load_policy(bare, shield="always").shield == ShieldParams()
     falling = np.array([[0.0, 0.0, 500.0, 0.0, 0.0, -90.0, 2000.0]])
     p = load_policy(shielded)
     a = p.act_batch(falling)
@@ -103,7 +103,7 @@ def test_policy_files_fly_behind_the_shield_their_metadata_asks_for(files):
     assert p.act(falling[0]) == a[0] and p.shield_fired == 2
     assert load_actor(f"bare:{shielded}")[0].shield is None
     assert load_actor(f"shield:{bare}")[0].shield == ShieldParams()
-    with pytest.raises(ValueError, match="shield must be one of file, on, off"):
+    with pytest.raises(ValueError, match="shield must be one of file, always, never"):
         load_policy(bare, shield="maybe")
 
 

@@ -117,7 +117,7 @@ def recovery_starts(
     when it fails less often than that): the teacher then shows the way out of the student's
     own crashes, which uniform draws rarely visit once the student lands 99 %. `shield`: the
     student flies behind the braking shield (pd_core.shield) even if its file has none."""
-    student = load_policy(policy_path, shield="on" if shield else "file")
+    student = load_policy(policy_path, shield="always" if shield else "file")
     n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)
