@@ -90,8 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--dispersions",
         metavar="NAME|FILE.yaml",
         help="run a campaign: every scenario (a name of pd_core.dispersions.SCENARIOS, a comma "
-        "list, 'standard' for all of them, or a YAML file) for every agent (the model and each "
-        "--compare); prints one table and writes campaign.json and campaign.png to --out",
+        "list, the campaign 'standard' (the ten judged scenarios) or 'broad' (those and harsher "
+        "ones), or a YAML file) for every agent (the model and each --compare); prints one "
+        "table and writes campaign.json and campaign.png to --out",
     )
     g.add_argument("--out", help="folder for campaign.json/.png (default out/campaign-<time>)")
     g.add_argument(
