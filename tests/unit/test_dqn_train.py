@@ -13,6 +13,8 @@ from pd_core.dqn.actor import NetActor
 from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.train import Trainer, train
 from pd_core.evaluate import rollout, summarise
+from pd_core.policy import load_policy
+from pd_core.shield import ShieldParams
 
 torch.set_num_threads(1)
 NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
@@ -159,3 +161,16 @@ def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path
     np.testing.assert_allclose(res.env.scenario_probs, p)
     rows = (tmp_path / "sf" / "scenarios.csv").read_text().splitlines()
     assert rows[0].startswith("wall_s,episodes,p_nominal,p_all,fail_nominal,fail_all")
+
+
+def test_shielded_run_evaluates_behind_the_shield_and_files_ask_for_it(tmp_path):
+    tr = Trainer(_small(tmp_path, "sh", seed=5, shield=True), quiet=True)
+    tr.run()
+    assert load_policy(tmp_path / "sh" / "final.pt").shield == ShieldParams()
+    # an untrained network crashes; behind the shield it touches down far slower, and the
+    # periodic evaluation (which picks best.pt) is the shielded flight
+    shielded = rollout(NetActor(tr.agent.q, ShieldParams()), 20, 0)
+    bare = rollout(NetActor(tr.agent.q), 20, 0)
+    assert shielded.final_states[:, 5].min() > bare.final_states[:, 5].min() + 5.0
+    vk = summarise(shielded)["table7"]["k_velocity_mps"]["min"]
+    assert tr.evaluate(episodes=20, seed=0)["kvel_min"] == pytest.approx(vk, abs=1e-9)

@@ -20,7 +20,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import REWARD, STATE_SCALE, RewardConfig
 from pd_core.controllers import make_controller
 from pd_core.dqn.actor import NetActor
@@ -41,7 +40,7 @@ from pd_core.env import make_vector_env
 from pd_core.evaluate import rollout, summarise
 from pd_core.plots import training_curves
 from pd_core.policy import code_version, load_policy, save_policy
-from pd_core.shield import ShieldParams, shield_actions
+from pd_core.shield import ShieldParams
 from pd_core.state import scale_state
 
 EvalCallback = Callable[[dict[str, float]], None]
@@ -365,10 +364,6 @@ class Trainer:
         """One batched epsilon-greedy step: n-step transitions into the replay, episode rows."""
         cfg = self.cfg
         actions = self.agent.act(self.obs, eps, self.rng)
-        if cfg.shield:
-            actions, _ = shield_actions(
-                actions, self.obs / STATE_SCALE, DEFAULT_ACTIONS, ShieldParams()
-            )
         nobs, r, term, trunc, info = self.env.step(actions)
         self.c.env_steps += cfg.num_envs
         self.ep_return += r
