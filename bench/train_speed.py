@@ -139,13 +139,16 @@ def loop_costs_us(seconds: float) -> dict[str, float]:
     return out
 
 
-def act_time_us(seconds: float) -> tuple[float, float]:
+def act_time_us(seconds: float) -> tuple[float, float, float]:
+    """Policy.act through numpy, the same behind the braking shield, torch forward+argmax."""
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as d:
         path = save_policy(Path(d) / "m", QNetwork())
         pol = load_policy(path)
+        shielded = load_policy(path, shield="always")
     s = np.array([800.0, 100.0, 2500.0, -40.0, 10.0, -80.0, 2000.0])
     n, dt = _timed(lambda: pol.act(s), seconds)
+    k, dt_sh = _timed(lambda: shielded.act(s), seconds)
     net = pol.network
     x = torch.from_numpy((s * 1.0).astype(np.float32))[None]
 
@@ -154,7 +157,7 @@ def act_time_us(seconds: float) -> tuple[float, float]:
             net(x).argmax()
 
     m, dt2 = _timed(torch_act, seconds)
-    return 1e6 * dt / n, 1e6 * dt2 / m
+    return 1e6 * dt / n, 1e6 * dt_sh / k, 1e6 * dt2 / m
 
 
 def env_steps_per_s(num_envs: int, seconds: float) -> float:
@@ -215,8 +218,11 @@ def main() -> None:
         cfg = replace(preset(name), **kw)
         ups = ours_updates_per_s(name, a.seconds, **kw)
         print(f"   updates/s, {name:12s} batch {cfg.batch_agent}+{cfg.batch_demo}: {ups:8.1f}")
-    us, ust = act_time_us(a.seconds)
-    print(f"   Policy.act(one state): numpy {us:.1f} us; torch forward+argmax {ust:.1f} us")
+    us, ussh, ust = act_time_us(a.seconds)
+    print(
+        f"   Policy.act(one state): numpy {us:.1f} us; behind the braking shield {ussh:.1f} us "
+        f"({ussh / us:.2f}x); torch forward+argmax {ust:.1f} us"
+    )
 
 
 if __name__ == "__main__":
