@@ -127,6 +127,11 @@ TABLE3 = StateRange(  # RL training and testing, Table 3
 
 STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 
+# --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
+
+BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
+LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
+
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
 
 # ours: truncation (not termination) after this long; the slowest landings of Table 3 take

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
-from pd_core.config import DT_S, GRAVITY_MPS2
+from pd_core.config import BRAKE_MARGIN, DT_S, GRAVITY_MPS2, LAND_SPEED_MPS
 from pd_core.mpc import MPCController, mpc_controller
 from pd_core.state import check_state
 
@@ -33,8 +33,8 @@ class ZemZevParams:
     """Gains of the reference controller (ours, tuned on Table 3 with disturbances)."""
 
     brake_accel_mps2: float = 2.5  # vertical braking deceleration of the profile
-    brake_margin: float = 0.9  # ... at most this fraction of what full thrust gives at mass m
-    land_speed_mps: float = 0.5  # descent speed the profile aims at on the pad: see below
+    brake_margin: float = BRAKE_MARGIN  # ... at most this fraction of what full thrust gives at m
+    land_speed_mps: float = LAND_SPEED_MPS  # descent speed the profile aims at on the pad: below
     vz_gain_per_s: float = 0.6 / DT_S  # vertical velocity-error gain (1/s): see below
     min_brake_accel_mps2: float = 0.3  # floor of a lateral-limited profile: keep descending
     lateral_limit: bool = True  # slow the descent when the lateral axes need more time

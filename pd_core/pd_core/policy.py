@@ -96,9 +96,11 @@ def _close(a: Any, b: Any) -> bool:
 
 class Policy:
     """Greedy policy of a trained Q-network, on physical states [x, y, z, vx, vy, vz, m] (SI),
-    behind the braking shield (`pd_core.shield`) when its metadata asks for one (`shield`)."""
+    behind the braking shield (`pd_core.shield`) if given one (`load_policy` decides)."""
 
-    def __init__(self, network: Any, metadata: dict[str, Any]) -> None:
+    def __init__(
+        self, network: Any, metadata: dict[str, Any], shield: ShieldParams | None = None
+    ) -> None:
         self.network = network.eval()
         self.metadata = metadata
         self.actions = ActionSpace(
@@ -116,8 +118,7 @@ class Policy:
             if hasattr(m, "weight")
         ]
         self._act_fn = np.tanh if metadata["network"]["activation"] == "tanh" else _relu
-        raw = metadata.get("shield")
-        self.shield: ShieldParams | None = None if not raw else ShieldParams.from_dict(raw)
+        self.shield = shield
         self.shield_fired = 0
         """steps on which the shield overrode the network (counted since loading)"""
 
@@ -253,11 +254,8 @@ def load_policy(path: str | Path, shield: str = "file") -> Policy:
         raise PolicyLoadError(f"{pt}: cannot load weights: {why} (network described in {js})")
     net.load_state_dict(state)
     try:
-        policy = Policy(net, meta)
-    except (TypeError, ValueError) as exc:
+        filed = ShieldParams.from_dict(meta["shield"]) if meta.get("shield") else None
+    except (AttributeError, TypeError, ValueError) as exc:
         raise PolicyLoadError(f"{js}: bad shield settings: {_one_line(exc)}") from exc
-    if shield == "never":
-        policy.shield = None
-    elif shield == "always":
-        policy.shield = policy.shield or ShieldParams()
-    return policy
+    chosen = {"file": filed, "always": filed or ShieldParams(), "never": None}[shield]
+    return Policy(net, meta, chosen)

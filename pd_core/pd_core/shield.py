@@ -4,17 +4,18 @@ A Q-network is trusted only where it was trained. Under dispersions its worst fa
 near misses but landers that keep falling at 90-100 m/s until the thrust left can no longer stop
 them (a 2200 kg lander with 5 % less thrust has 1.9 m/s^2 of net braking: 2.5 km to stop from
 98 m/s). The shield overrides only the vertical thrust, and only when the observed state
-would descend faster than the fastest speed from which a fraction `thrust_margin` of full vertical
-thrust still brakes to `land_speed_mps` at the pad:
+would descend faster than the fastest speed from which a fraction `thrust_margin` of full
+vertical thrust still brakes to `land_speed_mps` at the pad:
 
     v_max(z, m) = sqrt(v_land^2 + 2 z (margin * T_z,max / m - g)).
 
 It fires when the policy's own vertical command (counted at the margin) would put the lander
 beyond that limit one step later, and then commands full vertical thrust (the horizontal levels
-stay the policy's). Both numbers are
-the ZEM/ZEV teacher's (`ZemZevParams.brake_margin`, `land_speed_mps`): the shield is the
-teacher's own braking limit, not a value fitted to a campaign. A lander that cannot hover
-(margin * T_z,max < m g) is always shielded.
+stay the policy's). The two numbers are the ZEM/ZEV teacher's (config.BRAKE_MARGIN,
+LAND_SPEED_MPS), not values fitted to a campaign; the teacher applies its margin to the net
+braking (0.9 (T/m - g), 2.5 m/s^2 at 2000 kg), the shield to the thrust a shortfall takes away
+(0.9 T/m - g, 2.13 m/s^2), so the shield brakes a little earlier than the teacher's profile. A
+lander that cannot hover on the margin thrust may descend no faster than the land speed.
 """
 
 from __future__ import annotations
@@ -25,18 +26,20 @@ from typing import Any
 import numpy as np
 
 from pd_core.actions import ActionSpace
-from pd_core.config import DT_S, GRAVITY_MPS2
+from pd_core.config import BRAKE_MARGIN, DT_S, GRAVITY_MPS2, LAND_SPEED_MPS
+
+_G_MPS2 = float(-GRAVITY_MPS2[2])
 
 
 @dataclass(frozen=True)
 class ShieldParams:
     """Where the shield fires (see the module docstring)."""
 
-    thrust_margin: float = 0.9
-    """fraction of full vertical thrust the braking limit counts on (ZemZevParams.brake_margin:
-    room for a 5 % thrust shortfall, a 2 deg misalignment and 300 N gusts)"""
-    land_speed_mps: float = 0.5
-    """descent speed the limit brakes to at the pad (ZemZevParams.land_speed_mps)"""
+    thrust_margin: float = BRAKE_MARGIN
+    """fraction of full vertical thrust the braking limit counts on (room for a 5 % thrust
+    shortfall, a 2 deg misalignment and 300 N gusts)"""
+    land_speed_mps: float = LAND_SPEED_MPS
+    """descent speed the limit brakes to at the pad"""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.thrust_margin <= 1.0:
@@ -60,8 +63,7 @@ def max_descent_speed_mps(
 ) -> np.ndarray:
     """Fastest descent speed (m/s, >= 0) from which the margin thrust still brakes to the land
     speed by the pad; the land speed itself where the lander cannot brake at all."""
-    g = float(-np.asarray(GRAVITY_MPS2)[2])
-    a_net = p.thrust_margin * max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) - g
+    a_net = p.thrust_margin * max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) - _G_MPS2
     z = np.maximum(np.asarray(altitude_m, dtype=float), 0.0)
     return np.sqrt(p.land_speed_mps**2 + 2.0 * np.maximum(a_net, 0.0) * z)
 
@@ -74,8 +76,7 @@ def shield_mask(
     step ahead matters: a shield that fired only once the limit is crossed could never catch
     up, since braking at the margin thrust merely keeps the excess speed."""
     s = np.atleast_2d(states)
-    g = float(-np.asarray(GRAVITY_MPS2)[2])
-    a_z = p.thrust_margin * np.asarray(vertical_thrust_n, dtype=float) / s[:, 6] - g
+    a_z = p.thrust_margin * np.asarray(vertical_thrust_n, dtype=float) / s[:, 6] - _G_MPS2
     vz = s[:, 5] + a_z * DT_S
     z = s[:, 2] + (s[:, 5] + 0.5 * a_z * DT_S) * DT_S
     return -vz > max_descent_speed_mps(z, s[:, 6], max_vertical_thrust_n, p)
