@@ -1,5 +1,6 @@
 """Braking shield: its limit is the braking law it claims, it only touches the vertical axis, it
-saves a policy that never brakes, and policy files, pd-eval specs and training carry it."""
+saves a policy that never brakes, its touchdown guard stops free fall near the pad under delay,
+and policy files, pd-eval specs and training carry it."""
 
 from __future__ import annotations
 
@@ -15,12 +16,19 @@ from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
 from pd_core.dqn.network import QNetwork
 from pd_core.dynamics import step
 from pd_core.policy import PolicyLoadError, load_policy, save_policy
-from pd_core.shield import ShieldParams, max_descent_speed_mps, shield_actions, shield_mask
+from pd_core.shield import (
+    ShieldParams,
+    guard_mask,
+    max_descent_speed_mps,
+    shield_actions,
+    shield_mask,
+)
 
 torch.set_num_threads(1)
 G = -GRAVITY_MPS2[2]
 TZ = RL_THRUST.max_n[2]
 P = ShieldParams()
+BRAKE_ONLY = ShieldParams(guard_altitude_m=0.0)
 
 
 def test_limit_is_the_margin_braking_law():
@@ -47,7 +55,7 @@ def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
     s[:, 5] = rng.uniform(-110, 5, n)
     s[:, 6] = rng.uniform(1700, 2200, n)
     acts = rng.integers(0, DEFAULT_ACTIONS.n, n)
-    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, P)
+    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, BRAKE_ONLY)
     # one step ahead under the commanded vertical thrust, counted at the margin
     az = 0.9 * DEFAULT_ACTIONS.thrust(acts)[:, 2] / s[:, 6] - G
     z1 = s[:, 2] + s[:, 5] * DT_S + 0.5 * az * DT_S**2
@@ -79,6 +87,45 @@ def test_a_policy_that_never_brakes_touches_down_softly_behind_the_shield(thrust
     assert touchdown[False] > 100.0
     # one 0.2 s step of free fall (0.74 m/s) above the 0.5 m/s the limit brakes to
     assert touchdown[True] < 0.5 + G * DT_S + 0.1
+
+
+def test_the_guard_raises_free_fall_one_level_only_low_and_descending():
+    levels = np.array([[3, 3, 0], [0, 6, 0], [3, 3, 0], [3, 3, 0], [5, 1, 1], [3, 3, 2]])
+    acts = DEFAULT_ACTIONS.levels_to_action(levels)
+    s = np.tile([0.0, 0.0, 2.0, 0.0, 0.0, -0.3, 1600.0], (6, 1))
+    s[2, 2] = 11.0  # above the 10 m guard altitude
+    s[3, 5] = 0.2  # climbing
+    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, P)
+    np.testing.assert_array_equal(fired, [True, True, False, False, False, False])
+    np.testing.assert_array_equal(fired, guard_mask(s, levels[:, 2], P))
+    after = DEFAULT_ACTIONS.level_table[out]
+    np.testing.assert_array_equal(after[:, 0:2], levels[:, 0:2])  # horizontal untouched
+    np.testing.assert_array_equal(after[:, 2], [1, 1, 0, 0, 1, 2])
+    assert not shield_actions(acts, s, DEFAULT_ACTIONS, BRAKE_ONLY)[1].any()
+
+
+def test_the_guard_keeps_a_delayed_bang_bang_hover_soft():
+    """The failure the guard is for: a policy that holds the lander a metre up by alternating
+    free fall and full thrust, its commands landing one 0.2 s step late, with the altitude it
+    sees 1 m high. It ends with two free-fall steps (+1.5 m/s) that the braking limit alone,
+    which still counts on full thrust from 1 m, lets through."""
+    rng = np.random.default_rng(4)
+    touchdown = {}
+    for p in (P, BRAKE_ONLY):
+        s = np.array([0.0, 0.0, 1.0, 0.0, 0.0, -0.3, 1600.0])
+        in_flight = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 1]))
+        for _ in range(500):
+            seen = s + np.array([0, 0, 1.0 + rng.normal(0, 0.3), 0, 0, 0, 0])
+            level = 0 if seen[2] > 1.2 else 2  # bang-bang around 1.2 m observed
+            a = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, level]))
+            a = shield_actions(np.array([a]), seen[None], DEFAULT_ACTIONS, p)[0][0]
+            s = step(s, DEFAULT_ACTIONS.thrust(in_flight), np.zeros(3), DT_S)
+            in_flight = a
+            if s[2] < 0.0:
+                break
+        touchdown[p] = -s[5]
+    assert touchdown[BRAKE_ONLY] > 2.0  # Eq. 12 crash
+    assert touchdown[P] < 1.0
 
 
 @pytest.fixture()
