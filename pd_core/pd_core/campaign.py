@@ -35,6 +35,7 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
+from pd_core.shield import ShieldedActor
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -52,9 +53,13 @@ REACH_HEAD = ("out of reach", "success % of reachable")
 def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
     """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies as its
     metadata says (with the braking shield of `pd_core.shield` if it asks for it); `bare:<file>`
-    flies the network alone, `shield:<file>` behind the default shield."""
+    flies the network alone, `shield:<file>` behind the default shield, and
+    `shield:controller:<name>` the reference controller behind it."""
     if callable(spec):
         return spec(), getattr(spec, "__name__", "agent")
+    if spec.startswith("shield:controller:"):
+        name = spec.split(":", 2)[2]
+        return ShieldedActor(make_controller(name)), f"controller {name} + shield"
     if spec.startswith("controller:"):
         name = spec.split(":", 1)[1]
         return make_controller(name), f"controller {name}"

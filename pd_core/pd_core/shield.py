@@ -131,3 +131,32 @@ def shield_actions(
     levels[fire, 2] = space.n_per_axis[2] - 1
     levels[guard, 2] = 1
     return space.levels_to_action(levels).astype(np.int64), fire | guard
+
+
+class ShieldedActor:
+    """Any actor (`act_batch` on physical states -> action indices of `space`) behind the shield,
+    so that a reference controller can be flown behind the same runtime assurance as a policy
+    (a like-for-like comparison: `pd-eval ... --compare shield:controller:zemzev`)."""
+
+    def __init__(self, actor: Any, p: ShieldParams | None = None, space: ActionSpace | None = None):
+        self.actor = actor
+        self.shield = p or ShieldParams()
+        self.actions = space or actor.actions
+        self.name = f"{getattr(actor, 'name', 'actor')}+shield"
+        self.shield_fired = 0
+        """steps on which the shield overrode the actor (counted since construction)"""
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        a = self.actor.act_batch(states)
+        out, fired = shield_actions(a, np.reshape(states, (-1, 7)), self.actions, self.shield)
+        self.shield_fired += int(fired.sum())
+        return out.reshape(np.shape(a))
+
+    def act(self, state: np.ndarray) -> int:
+        return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
+
+    def thrust(self, action: int) -> np.ndarray:
+        return self.actions.thrust(int(action))
+
+    def __getattr__(self, name: str) -> Any:  # reset(), stats, params of the wrapped actor
+        return getattr(self.__dict__["actor"], name)

@@ -29,6 +29,7 @@ from rclpy.node import Node
 import pd_core
 from pd_core.config import TABLE3
 from pd_core.policy import SHIELD_MODES, PolicyLoadError
+from pd_core.shield import ShieldedActor
 from pd_core.state import check_state
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_ros_common import names, params, qos
@@ -104,9 +105,13 @@ def load_controller(name: str, model_path: str, shield: str = "file") -> tuple[A
     from pd_core.controllers import make_controller
 
     try:
-        return make_controller(name), f"reference controller {name}"
+        controller = make_controller(name)
     except ValueError as exc:
         raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from exc
+    if shield == "always":  # a controller has no file to ask for it: only "always" shields it
+        controller = ShieldedActor(controller)
+        return controller, f"reference controller {name}, braking shield {controller.shield}"
+    return controller, f"reference controller {name}"
 
 
 class PolicyNode(Node):

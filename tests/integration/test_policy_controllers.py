@@ -1,6 +1,6 @@
 """pd_policy_node's `controller` parameter: a reference controller of pd_core flies the lander over
 ROS in lockstep, exactly as it flies offline (issue 10 item 5); so does the DQN behind the braking
-shield (`shield` parameter)."""
+shield (`shield` parameter), and a reference controller behind it with shield "always"."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from helpers import ProcessSet
 from pd_core.controllers import CONTROLLERS, make_controller
 from pd_core.env import PoweredDescentEnv
 from pd_core.policy import load_policy
+from pd_core.shield import ShieldedActor
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_policy_node.node import default_model_path
@@ -52,7 +53,8 @@ class Loop:
         self, procs: ProcessSet, controller: str, seed: int, **params: str
     ) -> tuple[int, object]:
         """Start a policy node with `controller` (the only one) and an episode; (episode, node)."""
-        policy = procs.node("pd_policy_node", {"controller": controller, **params}, name=controller)
+        name = "-".join([controller, *params.values()])
+        policy = procs.node("pd_policy_node", {"controller": controller, **params}, name=name)
         assert policy.wait_log("policy ready", START_S), policy.log()
         n = self.node
         assert self.spin_until(
@@ -68,11 +70,14 @@ class Loop:
         return future.result().episode, policy
 
 
-def offline(controller: str, seed: int, steps: int | None = None) -> list[np.ndarray]:
+def offline(
+    controller: str, seed: int, steps: int | None = None, shield: str = "always"
+) -> list[np.ndarray]:
     if controller == "dqn":
-        ctl = load_policy(default_model_path(), shield="always")
+        ctl = load_policy(default_model_path(), shield=shield)
     else:
         ctl = make_controller(controller)
+        ctl = ShieldedActor(ctl) if shield == "always" else ctl
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed)
     states = [info["state"]]
@@ -84,13 +89,16 @@ def offline(controller: str, seed: int, steps: int | None = None) -> list[np.nda
     return states
 
 
-def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until):
+@pytest.mark.parametrize("shield", ["file", "always"])
+def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, shield):
+    """shield "always" puts the reference controller behind the braking shield, as offline."""
     loop = Loop(make_node, spin_until)
-    episode, policy = loop.fly(sim, "zemzev", seed=8)
+    episode, policy = loop.fly(sim, "zemzev", seed=8, shield=shield)
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
+    assert ("braking shield ShieldParams(" in policy.log()) == (shield == "always")
     result = next(r for r in loop.results if r.episode == episode)
-    expected = offline("zemzev", 8)
+    expected = offline("zemzev", 8, shield=shield)
     assert result.landed, result.reason
     assert result.steps == len(expected) - 1 and result.rejected_commands == 0
     np.testing.assert_array_equal(final_state(result), expected[-1])

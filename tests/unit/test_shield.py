@@ -13,10 +13,12 @@ import torch
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.campaign import load_actor
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
+from pd_core.controllers import make_controller
 from pd_core.dqn.network import QNetwork
 from pd_core.dynamics import step
 from pd_core.policy import PolicyLoadError, load_policy, save_policy
 from pd_core.shield import (
+    ShieldedActor,
     ShieldParams,
     guard_mask,
     max_descent_speed_mps,
@@ -164,3 +166,23 @@ def test_bad_shield_metadata_is_refused_in_one_line(files):
         with pytest.raises(PolicyLoadError, match=says) as err:
             load_policy(shielded)
         assert "\n" not in str(err.value) and "bad shield settings" in str(err.value)
+
+
+def test_a_reference_controller_flies_behind_the_same_shield():
+    """shield:controller:zemzev: ZEM/ZEV's own actions, overridden exactly where the shield
+    says, and counted (the like-for-like comparison of the model report)."""
+    rng = np.random.default_rng(5)
+    s = np.zeros((300, 7))
+    s[:, 2] = rng.uniform(0.0, 2500.0, 300)
+    s[:, 5] = rng.uniform(-110.0, 1.0, 300)
+    s[:, 6] = rng.uniform(1500.0, 2200.0, 300)
+    s[:100, 2] = rng.uniform(0.0, 10.0, 100)  # near the pad, where the guard acts
+    s[:100, 5] = rng.uniform(-2.0, 0.5, 100)
+    zz = make_controller("zemzev")
+    actor, label = load_actor("shield:controller:zemzev")
+    assert isinstance(actor, ShieldedActor) and label == "controller zemzev + shield"
+    want, fired = shield_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
+    np.testing.assert_array_equal(actor.act_batch(s), want)
+    assert actor.shield_fired == fired.sum() > 0
+    assert actor.act(s[0]) == want[0]
+    np.testing.assert_array_equal(actor.thrust(want[1]), DEFAULT_ACTIONS.thrust(want[1]))

@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="other policies (or controllers as NAME=controller:zemzev) flown on the same "
         "episodes: Table 7 blocks side by side, Figs. 5 and 7. A file flies as its metadata "
         "says (braking shield or not); bare:FILE flies the network alone, shield:FILE behind "
-        "the default braking shield",
+        "the default braking shield, shield:controller:NAME the controller behind it",
     )
     p.add_argument(
         "--training-log",
@@ -246,7 +246,7 @@ def training_logs(args: argparse.Namespace, specs: dict[str, str]) -> dict[str, 
     logs = {n: Path(p) for n, p in (_split(s) for s in args.training_log)}
     for n, spec in specs.items():
         csv = Path(spec).with_suffix(".episodes.csv")
-        if n not in logs and not spec.startswith("controller:") and csv.is_file():
+        if n not in logs and "controller:" not in spec and csv.is_file():
             logs[n] = csv
     return logs
 
