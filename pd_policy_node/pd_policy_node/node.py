@@ -59,9 +59,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     "shield": (
         "file",
-        "Braking shield of the 'dqn' controller (pd_core.shield: full vertical thrust when the "
-        "lander descends faster than it can still brake): 'file' as the policy file's metadata "
-        "says, 'always', or 'never' (the bare network; YAML reads on/off as booleans).",
+        "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
+        "than it can still brake, no free fall below 10 m): 'file' as the policy file's "
+        "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
+        "network; YAML reads on/off as booleans).",
     ),
     "stats_period_s": (
         10.0,
