@@ -160,7 +160,11 @@ def test_bad_shield_metadata_is_refused_in_one_line(files):
     _, shielded = files
     js = shielded.with_suffix(".json")
     meta = json.loads(js.read_text())
-    for bad, says in (({"thrust_margin": 1.5}, "thrust_margin must be in"), ({"gain": 1}, "gain")):
+    for bad, says in (
+        ({"thrust_margin": 1.5}, "thrust_margin must be in"),
+        ({"guard_altitude_m": -1}, "guard_altitude_m must be in"),
+        ({"gain": 1}, "gain"),
+    ):
         meta["shield"] = bad
         js.write_text(json.dumps(meta))
         with pytest.raises(PolicyLoadError, match=says) as err:
