@@ -4,7 +4,9 @@
 each step waits for a thrust command that names the episode and step it answers, and a command is
 applied only if it is valid for the step being flown and is the first valid one for that step
 (a second command for an answered step, from a second policy node or a stray publisher, is
-rejected as a "conflict", or a "duplicate" when it repeats the first). Anything else is rejected
+rejected as a "conflict", or a "duplicate" when it repeats the first). With `command_source`
+set, only commands from the node of that name fly: a stray publisher cannot take a step even
+when it answers first (rejected as "foreign"). Anything else is rejected
 with a reason, counted, and never applied. An initial state is accepted only if the OCP would
 take it (`pd_core.ocp.check_request`: above ground, above the dry mass, plausible magnitudes).
 When a step has to be flown without a fresh command, the last applied command is held
@@ -49,6 +51,7 @@ class Command:
     step: int
     action: int
     thrust_n: tuple[float, float, float]
+    source: str = ""  # name of the publishing node ("" when unknown or not asked for)
 
 
 @dataclass(frozen=True)
@@ -117,6 +120,18 @@ def check_command(
     return None
 
 
+def check_source(cmd: Command, command_source: str) -> tuple[str, str] | None:
+    """None if `cmd` comes from the node `command_source` names ("" accepts any publisher),
+    else ("foreign", message). Checked first: a command from elsewhere is not ours to judge."""
+    if not command_source or cmd.source == command_source:
+        return None
+    sender = f"node {cmd.source!r}" if cmd.source else "a publisher of unknown node"
+    return "foreign", (
+        f"command for episode {cmd.episode} step {cmd.step} from {sender}, not from "
+        f"{command_source!r} (command_source): not flown"
+    )
+
+
 def answered_already(first: Command | None, cmd: Command) -> tuple[str, str]:
     """(kind, message) rejecting `cmd` for a step that `first` answered already."""
     a = first.action if first is not None else None
@@ -174,6 +189,7 @@ class Simulator:
         actions: ActionSpace = DEFAULT_ACTIONS,
         dt_s: float = DT_S,
         seed: int | None = None,
+        command_source: str = "",
     ) -> None:
         if missing_command not in MISSING_COMMAND_MODES:
             raise ValueError(
@@ -190,6 +206,8 @@ class Simulator:
         )
         self.actions = actions
         self.missing_command = missing_command
+        self.command_source = command_source
+        """only commands whose `source` is this node name fly ("": any publisher)"""
         self.counters = Counters()
         self.episode = 0  # number of the current (or last) episode; 0 before the first
         self.flying = False
@@ -258,7 +276,9 @@ class Simulator:
     def submit(self, cmd: Command) -> tuple[str, str] | None:
         """Validate and store a command for the current step; None or (kind, reason) if rejected."""
         where = (self.episode, self.step) if self.flying else (None, None)
-        err = check_command(cmd, *where, actions=self.actions)
+        err = check_source(cmd, self.command_source) or check_command(
+            cmd, *where, actions=self.actions
+        )
         if err is None and self.has_fresh_command:
             err = answered_already(self._pending, cmd)
         if err is not None:

@@ -36,7 +36,7 @@ from pd_ros_common import names, params, qos
 from pd_ros_common.convert import command_msg, state_from_msg
 from pd_ros_common.run import run_node
 
-NODE_NAME = "pd_policy_node"
+NODE_NAME = names.POLICY_NODE
 MODEL_ENV = "PD_MODEL_PATH"
 # The shipped policy (models/pd_dqn_robust.md says how it was trained and how it scores): it
 # lands as often as models/pd_dqn_best.pt on the nominal problem and far more often under the

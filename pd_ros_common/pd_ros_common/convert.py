@@ -73,9 +73,11 @@ def command_msg(state: LanderState, action: int, thrust_n: np.ndarray) -> Thrust
     return cmd
 
 
-def command_from_msg(msg: ThrustCommand) -> Command:
+def command_from_msg(msg: ThrustCommand, source: str = "") -> Command:
+    """`source`: the publishing node's name, when the receiver resolved it."""
     t = from_vec3(msg.thrust)
-    return Command(int(msg.episode), int(msg.step), int(msg.action), tuple(float(v) for v in t))
+    thrust = tuple(float(v) for v in t)
+    return Command(int(msg.episode), int(msg.step), int(msg.action), thrust, source)
 
 
 def result_msg(result: dict[str, Any]) -> EpisodeResult:

@@ -14,6 +14,7 @@ RESET_SERVICE = "sim/reset"
 OCP_SERVICE = "ocp/compute_trajectory"
 
 LANDER_TOPICS = (STATE_TOPIC, COMMAND_TOPIC, EPISODE_TOPIC)
+POLICY_NODE = "pd_policy_node"  # the stack's commanding node (the simulator's command_source)
 
 
 def resolve(name: str, namespace: str = "/") -> str:

@@ -21,6 +21,7 @@ afterwards); defaults are in pd_bringup/config/sim.yaml.
 
 from __future__ import annotations
 
+import re
 import sys
 import threading
 import time
@@ -38,6 +39,7 @@ from pd_ros_common import names, params, qos
 from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
 from pd_ros_common.gaps import SequenceGaps
 from pd_ros_common.run import run_node
+from pd_ros_common.sources import PublisherNames
 
 NODE_NAME = "pd_sim_node"
 
@@ -104,6 +106,12 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "Rejected commands logged one by one per episode; after that every 100th (all are "
         "counted in EpisodeResult.rejected_commands).",
     ),
+    "command_source": (
+        "",
+        "Name of the one node whose thrust commands fly (e.g. pd_policy_node, as the launch "
+        "file sets it): commands from any other publisher are rejected as foreign and counted, "
+        "even when they answer a step first. Empty = any publisher (the first command wins).",
+    ),
 }
 
 CHECKS: dict[str, params.Check] = {
@@ -115,6 +123,11 @@ CHECKS: dict[str, params.Check] = {
     "max_time_s": params.at_least(DT_S),
     "tick_priority": params.at_least(0),
     "log_rejections": params.at_least(0),
+    "command_source": lambda v: (
+        None
+        if re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)?", v)
+        else "must be a node name (letters, digits, underscores) or empty"
+    ),
 }
 
 
@@ -139,6 +152,7 @@ class SimNode(Node):
             missing_command=p["missing_command"],
             max_time_s=p["max_time_s"],
             seed=p["seed"] if p["seed"] >= 0 else None,
+            command_source=p["command_source"],
         )
         self._restart_due = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command
@@ -146,6 +160,9 @@ class SimNode(Node):
         self._lateness: list[float] = []
         self.lost_commands = 0  # never arrived: sequence gaps plus DDS message-lost events
         self._gaps = SequenceGaps()
+        self._sources = PublisherNames(
+            lambda: self.get_publishers_info_by_topic(self._cmd_sub.topic_name)
+        )
 
         self._state_pub = self.create_publisher(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS)
         self._episode_pub = self.create_publisher(
@@ -168,7 +185,8 @@ class SimNode(Node):
         mode = "lockstep" if self.lockstep else f"real time at {self.rate_hz:g} Hz"
         self.get_logger().info(
             f"simulator ready: {mode}, missing_command={p['missing_command']}, "
-            f"disturbance={p['disturbance']}, seed={p['seed']}"
+            f"disturbance={p['disturbance']}, seed={p['seed']}, "
+            f"command_source={p['command_source'] or '(any publisher)'}"
         )
         if p["autostart"]:
             init = p["initial_state"]
@@ -303,7 +321,8 @@ class SimNode(Node):
         missing, first, last = self._gaps.update(info)
         if missing:  # a sender's queue overflowed: those commands never reached us
             self._count_lost(missing, f"of one publisher never arrived (sequence {first}..{last})")
-        cmd = command_from_msg(msg)
+        source = self._sources.name_of(info) if self._sim.command_source else ""
+        cmd = command_from_msg(msg, source)
         with self._lock:
             err = self._sim.submit(cmd)
             if err is not None:

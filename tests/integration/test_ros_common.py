@@ -1,4 +1,5 @@
-"""pd_ros_common's pure parts: parameter coercion and checks, sequence gaps, names, domains."""
+"""pd_ros_common's pure parts: parameter coercion and checks, sequence gaps, publisher names,
+names, domains; the simulator's command_source check."""
 
 from __future__ import annotations
 
@@ -12,6 +13,9 @@ import pytest
 from pd_ros_common import names, params
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.gaps import SequenceGaps
+from pd_ros_common.sources import PublisherNames
+from pd_sim_node.node import CHECKS as SIM_CHECKS
+from pd_sim_node.node import PARAMETERS as SIM_PARAMS
 
 pytestmark = [pytest.mark.integration]
 
@@ -77,6 +81,33 @@ def test_sequence_gaps_per_publisher():
     assert gaps.update(_info(b"a", 9)) == (0, 0, 0)  # late, not a new gap
     assert gaps.update({"publication_sequence_number": None}) == (0, 0, 0)
     assert gaps.total == 3
+
+
+class _Endpoint:
+    def __init__(self, name: str, gid: bytes) -> None:
+        self.node_name, self.endpoint_gid = name, list(gid)
+
+
+def test_publisher_names_resolve_from_the_graph_and_are_cached():
+    graph = [_Endpoint("pd_policy_node", b"p" * 16)]
+    names_ = PublisherNames(lambda: graph)
+    assert names_.name_of(_info(b"p" * 16, 1)) == "pd_policy_node"
+    assert names_.name_of(_info(b"p" * 16, 2)) == "pd_policy_node" and names_.lookups == 1
+    assert names_.name_of(_info(b"s" * 16, 1)) == ""  # not discovered yet: asked again next time
+    graph.append(_Endpoint("stray", b"s" * 16))
+    assert names_.name_of(_info(b"s" * 16, 2)) == "stray" and names_.lookups == 3
+    assert names_.name_of({"publication_sequence_number": 1}) == ""
+
+
+@pytest.mark.parametrize(
+    ("value", "ok"), [("", True), ("pd_policy_node", True), ("my_ctl2", True), ("/ns/x", False)]
+)
+def test_sim_command_source_must_be_a_node_name(value, ok):
+    if ok:
+        assert params.check_value("command_source", value, SIM_PARAMS, SIM_CHECKS) == value
+    else:
+        with pytest.raises(params.ParameterError, match="must be a node name"):
+            params.check_value("command_source", value, SIM_PARAMS, SIM_CHECKS)
 
 
 def test_names_are_relative_and_resolve():

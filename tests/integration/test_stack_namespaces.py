@@ -1,8 +1,9 @@
 """Two real-time stacks on one ROS domain, in two namespaces, with the shipped policy (issue 9).
 
-- /vehicle1 starts its simulator and policy together (the launch file's order); a stray
-  publisher in /vehicle1 sends a conflicting command for every step right after the policy's:
-  the first command wins, every stray one is rejected and counted, and the lander lands;
+- /vehicle1 starts its simulator and policy together (the launch file's order, with its
+  `command_source`); a stray publisher in /vehicle1 sends a conflicting command for every step
+  right after the policy's: every stray one is rejected as foreign and counted (whichever
+  arrives first: under load a stray used to win the odd step) and the lander lands;
 - /vehicle2 follows the README's `ros2 run` order: the simulator first, the policy seconds later.
   The simulator waits for the first command before its clock starts, so nothing is missed at
   start-up and it lands;
@@ -20,6 +21,7 @@ from helpers import ProcessSet
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_ros_common import qos
 from pd_ros_common.convert import vec3
+from pd_ros_common.names import POLICY_NODE
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -53,7 +55,12 @@ def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin
     ns1, ns2 = {"__ns": "/vehicle1"}, {"__ns": "/vehicle2"}
     try:
         # 10 Hz halves the test; the start-up race does not depend on the rate.
-        sim1 = procs.node("pd_sim_node", {"seed": 1, "rate_hz": 10.0}, ns1, name="sim1")
+        sim1 = procs.node(
+            "pd_sim_node",
+            {"seed": 1, "rate_hz": 10.0, "command_source": POLICY_NODE},
+            ns1,
+            name="sim1",
+        )
         pol1 = procs.node("pd_policy_node", {}, ns1, name="policy1")
         sim2 = procs.node("pd_sim_node", {"seed": 2, "rate_hz": 10.0}, ns2, name="sim2")
         assert sim2.wait_log("episode 1 starts", START_S), procs.logs()
@@ -69,7 +76,8 @@ def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin
         assert r2.rejected_commands == 0, "vehicle1's stray commands reached vehicle2"
         assert len(strays) > 50
         assert r1.rejected_commands >= len(strays) * 0.9, (r1.rejected_commands, len(strays))
-        assert "(conflict)" in sim1.log() and "first command wins" in sim1.log()
+        assert "(foreign)" in sim1.log() and "'namespaces_probe'" in sim1.log(), sim1.log()
+        assert "(conflict)" not in sim1.log(), sim1.log()  # the policy's commands all flew
         assert all(p.alive for p in (sim1, pol1, sim2, pol2)), procs.logs()
         assert pol2.stop(sig=signal.SIGINT, timeout_s=30.0) == 0  # slow on a loaded machine
         assert "decision time overall" in pol2.log()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -168,6 +169,25 @@ def test_first_valid_command_wins_later_ones_rejected_and_counted():
     assert sim.submit(cmd(1, 1, HOVER)) is None
     assert sim.advance().action == HOVER
     assert sim.reset()[2]["rejected_commands"] == 3
+
+
+def test_with_a_command_source_a_foreign_command_never_flies_even_first():
+    sim = Simulator(command_source="pd_policy_node")
+    sim.reset(seed=0)
+    stray = replace(cmd(1, 0, 3), source="stray_node")
+    kind, why = sim.submit(stray)
+    assert kind == "foreign" and "'stray_node'" in why and "command_source" in why
+    assert sim.submit(replace(cmd(1, 0, HOVER), source=""))[0] == "foreign"  # unresolved
+    assert sim.submit(replace(cmd(1, 0, HOVER), source="pd_policy_node")) is None
+    assert sim.advance().action == HOVER
+    # foreign is checked before content: a malformed stray is reported as foreign
+    bad = replace(cmd(1, 1, 500, (0.0, 0.0, 0.0)), source="stray_node")
+    assert sim.submit(bad)[0] == "foreign"
+    assert sim.counters.rejected_by_reason == {"foreign": 3}
+    assert sim.reset()[2]["rejected_commands"] == 3
+    anyone = Simulator()  # default: any publisher, first command wins
+    anyone.reset(seed=0)
+    assert anyone.submit(stray) is None
 
 
 @pytest.mark.parametrize(
