@@ -138,7 +138,9 @@ class ShieldedActor:
     so that a reference controller can be flown behind the same runtime assurance as a policy
     (a like-for-like comparison: `pd-eval ... --compare shield:controller:zemzev`)."""
 
-    def __init__(self, actor: Any, p: ShieldParams | None = None, space: ActionSpace | None = None):
+    def __init__(
+        self, actor: Any, p: ShieldParams | None = None, space: ActionSpace | None = None
+    ) -> None:
         self.actor = actor
         self.shield = p or ShieldParams()
         self.actions = space or actor.actions
@@ -159,4 +161,7 @@ class ShieldedActor:
         return self.actions.thrust(int(action))
 
     def __getattr__(self, name: str) -> Any:  # reset(), stats, params of the wrapped actor
-        return getattr(self.__dict__["actor"], name)
+        actor = self.__dict__.get("actor")
+        if actor is None:  # not constructed (e.g. while unpickling)
+            raise AttributeError(name)
+        return getattr(actor, name)
