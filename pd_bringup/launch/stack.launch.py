@@ -63,8 +63,6 @@ def generate_launch_description() -> LaunchDescription:
                     {
                         "lockstep": ParameterValue(lockstep, value_type=bool),
                         "seed": ParameterValue(seed, value_type=int),
-                        # only the stack's own policy node flies the lander (no hijack)
-                        "command_source": "pd_policy_node",
                     },
                 ],
             ),

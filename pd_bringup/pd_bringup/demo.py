@@ -28,7 +28,6 @@ from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
 from pd_core.plots import flight_vs_ocp
 from pd_ros_common.convert import final_state
 from pd_ros_common.domain import claim_domain_id
-from pd_ros_common.names import POLICY_NODE
 from pd_ros_common.process import ProcessError, Supervisor, executable
 
 START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
@@ -65,9 +64,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def start_stack(sup: Supervisor, args: argparse.Namespace, bag: Path) -> None:
     policy = {"controller": args.controller, **({"model_path": args.model} if args.model else {})}
-    sim = {"lockstep": args.fast, "autostart": False, "command_source": POLICY_NODE}
-    sup.node("pd_sim_node", sim)
-    sup.node("pd_policy_node", policy)  # its node name is POLICY_NODE
+    sup.node("pd_sim_node", {"lockstep": args.fast, "autostart": False})
+    sup.node("pd_policy_node", policy)
     sup.node("pd_ocp_node")
     sup.start("pd_record", [executable("pd_bringup", "pd_record"), "-o", str(bag)])
 

@@ -2,15 +2,19 @@
 
 rclpy hands a two-argument callback the writer's gid (MessageInfo `publisher_gid`), and the ROS
 graph lists each publisher of a topic with its node name and the same gid
-(`Node.get_publishers_info_by_topic`). The graph is asked again only for a gid not seen yet: a
-message can arrive before discovery has reported its writer, so an unknown gid is looked up on
-every message until it resolves (and is "" meanwhile).
+(`Node.get_publishers_info_by_topic`). The graph is asked again only for a gid not resolved yet:
+a message can arrive before discovery has reported its writer, or with the writer listed but its
+node not yet (Fast DDS names it `_NODE_NAME_UNKNOWN_` until the node's discovery info arrives),
+so such a gid is looked up on every message until it resolves (and is "" meanwhile; never
+cached, or a legitimate node seen early would be refused for good).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
+
+UNRESOLVED = ("", "_NODE_NAME_UNKNOWN_")  # what the graph says before it knows the node
 
 
 class PublisherNames:
@@ -32,5 +36,6 @@ class PublisherNames:
         if key not in self._names:
             self.lookups += 1
             for e in self._publishers():
-                self._names[bytes(bytearray(e.endpoint_gid))] = e.node_name
+                if e.node_name not in UNRESOLVED:
+                    self._names[bytes(bytearray(e.endpoint_gid))] = e.node_name
         return self._names.get(key, "")

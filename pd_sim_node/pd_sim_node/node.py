@@ -108,9 +108,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     "command_source": (
         "",
-        "Name of the one node whose thrust commands fly (e.g. pd_policy_node, as the launch "
-        "file sets it): commands from any other publisher are rejected as foreign and counted, "
-        "even when they answer a step first. Empty = any publisher (the first command wins).",
+        "Name of the one node whose thrust commands fly (e.g. pd_policy_node): commands from "
+        "any other publisher, or one the ROS graph cannot name yet, are rejected as foreign and "
+        "counted, even when they answer a step first. Empty = any publisher (first command "
+        "wins).",
     ),
 }
 

@@ -94,8 +94,10 @@ def test_publisher_names_resolve_from_the_graph_and_are_cached():
     assert names_.name_of(_info(b"p" * 16, 1)) == "pd_policy_node"
     assert names_.name_of(_info(b"p" * 16, 2)) == "pd_policy_node" and names_.lookups == 1
     assert names_.name_of(_info(b"s" * 16, 1)) == ""  # not discovered yet: asked again next time
-    graph.append(_Endpoint("stray", b"s" * 16))
-    assert names_.name_of(_info(b"s" * 16, 2)) == "stray" and names_.lookups == 3
+    graph.append(_Endpoint("_NODE_NAME_UNKNOWN_", b"s" * 16))  # writer seen, node not yet
+    assert names_.name_of(_info(b"s" * 16, 2)) == ""
+    graph[-1] = _Endpoint("stray", b"s" * 16)
+    assert names_.name_of(_info(b"s" * 16, 3)) == "stray" and names_.lookups == 4
     assert names_.name_of({"publication_sequence_number": 1}) == ""
 
 

@@ -76,7 +76,8 @@ def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin
         assert r2.rejected_commands == 0, "vehicle1's stray commands reached vehicle2"
         assert len(strays) > 50
         assert r1.rejected_commands >= len(strays) * 0.9, (r1.rejected_commands, len(strays))
-        assert "(foreign)" in sim1.log() and "'namespaces_probe'" in sim1.log(), sim1.log()
+        # (the stray's first commands may come before the graph names its node: still foreign)
+        assert "(foreign)" in sim1.log() and "command_source" in sim1.log(), sim1.log()
         assert "(conflict)" not in sim1.log(), sim1.log()  # the policy's commands all flew
         assert all(p.alive for p in (sim1, pol1, sim2, pol2)), procs.logs()
         assert pol2.stop(sig=signal.SIGINT, timeout_s=30.0) == 0  # slow on a loaded machine
