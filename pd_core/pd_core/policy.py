@@ -140,11 +140,9 @@ class Policy:
         greedy = np.argmax(self.q_values(states), axis=-1)
         if self.shield is None:
             return greedy
-        shielded, fired = shield_actions(
-            greedy, np.reshape(states, (-1, 7)), self.actions, self.shield
-        )
+        shielded, fired = shield_actions(greedy, states, self.actions, self.shield)
         self.shield_fired += int(fired.sum())
-        return shielded.reshape(np.shape(greedy))
+        return shielded
 
     def thrust(self, action: int) -> np.ndarray:
         """Thrust (3,) in N of an action index; ValueError if out of range."""

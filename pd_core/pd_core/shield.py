@@ -117,20 +117,21 @@ def guard_mask(states: np.ndarray, vertical_levels: np.ndarray, p: ShieldParams)
 def shield_actions(
     actions: np.ndarray, states: np.ndarray, space: ActionSpace, p: ShieldParams
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(shielded actions, mask of the overridden ones) for actions (B,) chosen in physical
-    states (B, 7): full vertical thrust where `shield_mask`, else one vertical level up where
-    `guard_mask`."""
+    """(shielded actions in the shape of `actions`, flat mask of the overridden ones) for
+    actions (...) chosen in physical states (..., 7): full vertical thrust where `shield_mask`,
+    else one vertical level up where `guard_mask`."""
+    shape = np.shape(actions)
     a = np.asarray(actions, dtype=np.int64).reshape(-1)
-    s = np.atleast_2d(states)
+    s = np.reshape(states, (-1, 7))
     levels = space.level_table[a]
     fire = shield_mask(s, space.table_n[a, 2], float(space.limits.hi[2]), p)
     guard = guard_mask(s, levels[:, 2], p) & ~fire
     if not (fire.any() or guard.any()):
-        return a, fire
+        return a.reshape(shape), fire
     levels = levels.copy()
     levels[fire, 2] = space.n_per_axis[2] - 1
     levels[guard, 2] = 1
-    return space.levels_to_action(levels).astype(np.int64), fire | guard
+    return space.levels_to_action(levels).astype(np.int64).reshape(shape), fire | guard
 
 
 class ShieldedActor:
@@ -149,10 +150,9 @@ class ShieldedActor:
         """steps on which the shield overrode the actor (counted since construction)"""
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
-        a = self.actor.act_batch(states)
-        out, fired = shield_actions(a, np.reshape(states, (-1, 7)), self.actions, self.shield)
+        out, fired = shield_actions(self.actor.act_batch(states), states, self.actions, self.shield)
         self.shield_fired += int(fired.sum())
-        return out.reshape(np.shape(a))
+        return out
 
     def act(self, state: np.ndarray) -> int:
         return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
