@@ -62,6 +62,10 @@ class RewardConfig:
     beta: float = -0.05  # control-effort weight, Sec. 3.2
     eta: float = 0.01  # per-step bonus, Sec. 3.2
     kappa: float = 10.0  # landing bonus, Sec. 3.2
+    # ours (0: the paper): on landing, + this * (1 - |r_ij| / x_lim). Eq. 12's bonus is flat
+    # inside 5 m and below 15 m Eq. 13 aims the lateral velocity at 0, not at the pad, so the
+    # paper's reward has no gradient towards a miss under a few metres.
+    precision_bonus: float = 0.0
     v0_mps: float = 70.0  # Eq. 14
     altitude_switch_m: float = 15.0  # Eqs. 16-18 branch
     r_offset_m: float = 15.0  # Eq. 16, r_hat = x - [0 0 15] above the switch

@@ -66,6 +66,9 @@ def reward(
     effort = _norm(thrust_n / t_max)
     ok = landed(position_m, velocity_mps, cfg) if landed_mask is None else landed_mask
     bonus = np.where(ok, cfg.kappa, 0.0)
+    if cfg.precision_bonus:
+        miss = _norm(position_m[..., 0:2])
+        bonus = bonus + np.where(ok, cfg.precision_bonus * (1.0 - miss / cfg.x_lim_m), 0.0)
     return cfg.alpha * v_err + cfg.beta * effort + cfg.eta + bonus
 
 
@@ -97,11 +100,14 @@ def reward_scalar(
         and math.sqrt(x * x + y * y + z * z) < cfg.x_lim_m
         and speed < cfg.v_lim_mps
     )
+    bonus = 0.0
+    if ok:
+        bonus = cfg.kappa + cfg.precision_bonus * (1.0 - math.sqrt(x * x + y * y) / cfg.x_lim_m)
     r = (
         cfg.alpha * math.sqrt(ex * ex + ey * ey + ez * ez)
         + cfg.beta * math.sqrt(fx * fx + fy * fy + fz * fz)
         + cfg.eta
-        + (cfg.kappa if ok else 0.0)
+        + bonus
     )
     return r, ok
 

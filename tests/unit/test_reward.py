@@ -1,10 +1,12 @@
 """Eqs. 12-18 at hand-computed states, both altitude branches, and the t_go guards."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from pd_core.config import REWARD
 from pd_core.reward import landed, reward, reward_scalar, target_velocity
 
 
@@ -75,3 +77,20 @@ def test_batched_equals_scalar():
     for i in range(200):
         scalar, _ = reward_scalar(tuple(pos[i]) + tuple(vel[i]) + (2000.0,), tuple(thrust[i]))
         assert scalar == pytest.approx(batched[i], abs=1e-12)
+
+
+def test_precision_bonus_rises_towards_the_pad_and_is_off_by_default():
+    # landed at 1.414 m from the pad: + 10 * (1 - 1.414 / 5) = 7.17 on top of kappa; 0 when off
+    cfg = replace(REWARD, precision_bonus=10.0)
+    pos, vel, thrust = np.array([1.0, 1.0, 0.005]), np.array([0.5, 0.0, -1.0]), np.zeros(3)
+    gain = reward(pos, vel, thrust, cfg) - reward(pos, vel, thrust)
+    assert gain == pytest.approx(10.0 * (1.0 - math.sqrt(2.0) / 5.0), abs=1e-12)
+    centre = reward(np.array([0.0, 0.0, 0.005]), vel, thrust, cfg) - reward(
+        np.array([0.0, 0.0, 0.005]), vel, thrust
+    )
+    assert centre == pytest.approx(10.0, abs=1e-12)
+    # not landed (too fast): no bonus of either kind
+    fast = np.array([0.5, 0.0, -2.5])
+    assert reward(pos, fast, thrust, cfg) == pytest.approx(reward(pos, fast, thrust), abs=1e-12)
+    scalar, ok = reward_scalar(tuple(pos) + tuple(vel) + (1700.0,), tuple(thrust), cfg)
+    assert ok and scalar == pytest.approx(float(reward(pos, vel, thrust, cfg)), abs=1e-12)

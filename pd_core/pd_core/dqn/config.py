@@ -118,6 +118,9 @@ class TrainConfig:
     """with scenario_sampling=failures: recent training episodes per scenario it counts"""
     fuel_weight: float = 1.0
     """multiplies beta (control effort) of the training reward; evaluation is unaffected"""
+    precision_bonus: float = 0.0
+    """landing bonus on top of kappa, this * (1 - miss / 5 m), in the training reward (0: the
+    paper's flat bonus); evaluation is unaffected"""
     eval_every_s: float = 60.0
     """greedy evaluation on eval_episodes seeded episodes every this many seconds (0: off)"""
     eval_episodes: int = 200
@@ -218,6 +221,7 @@ _NON_NEGATIVE = (
     "eval_every_s",
     "checkpoint_every_s",
     "torch_threads",
+    "precision_bonus",
 )
 
 

@@ -51,8 +51,9 @@ PRETRAIN_LOG_EVERY = 1000
 
 
 def training_reward(cfg: TrainConfig) -> RewardConfig:
-    """Eq. 12 with beta scaled by `fuel_weight` (1.0: the paper's reward)."""
-    return replace(REWARD, beta=REWARD.beta * cfg.fuel_weight)
+    """Eq. 12 with beta scaled by `fuel_weight` and the landing bonus raised by
+    `precision_bonus` (1.0 and 0.0: the paper's reward)."""
+    return replace(REWARD, beta=REWARD.beta * cfg.fuel_weight, precision_bonus=cfg.precision_bonus)
 
 
 def policy_metadata(cfg: TrainConfig, extra: dict[str, Any] | None = None) -> dict[str, Any]:
