@@ -1,0 +1,116 @@
+"""Where the fuel above the fuel-optimal landing goes, and how much of it a braking reserve costs
+(issue 10's nominal fuel target, <= 1.05x), in one run.
+
+    python bench/fuel_floor.py [--episodes 20] [--seed 0] [--agents models/pd_dqn_robust.pt ...]
+
+Part 1: the fuel-optimal landing (`pd_core.ocp.solve(objective="fuel")`, RL thrust limits) from the
+first `--episodes` nominal Table 3 initial states of seed `--seed`, with the vertical thrust capped
+at each `--fractions` of its 13 kN. A guidance law that keeps a reserve of (1 - f) of the vertical
+thrust for thrust shortfalls, gusts and misalignment (the braking shield counts on f = 0.9) cannot
+land for less than the f row: its ratio to the full-thrust optimum is the floor for such a law.
+
+Part 2: each agent (`pd-eval` specs: a policy file, `controller:NAME`, `shield:controller:NAME`)
+flies the same episodes (disturbances on). Printed per agent: median fuel / fuel-optimal, flight
+time, and the time and fuel spent in each altitude band (above 500 m, 500-20 m, below 20 m)
+beside the optimum's, to show where the extra fuel goes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from pd_core import ocp  # noqa: E402
+from pd_core.campaign import load_actor  # noqa: E402
+from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
+from pd_core.controllers import make_controller  # noqa: E402
+from pd_core.evaluate import rollout  # noqa: E402
+
+BANDS_M = (500.0, 20.0)  # part 2 splits each flight at these altitudes
+
+
+def capped(fraction: float) -> ThrustLimits:
+    """RL thrust limits with the vertical maximum scaled by `fraction`."""
+    hi = RL_THRUST.max_n
+    return ThrustLimits(RL_THRUST.min_n, (hi[0], hi[1], fraction * hi[2]))
+
+
+def bands(z_m: np.ndarray, t_s: np.ndarray, m_kg: np.ndarray) -> list[float]:
+    """[time s, fuel kg] of each altitude band (above BANDS_M[0], ..., below BANDS_M[-1])."""
+    cuts = [0] + [int(np.argmax(z_m < h)) for h in BANDS_M] + [len(z_m) - 1]
+    out: list[float] = []
+    for i, j in zip(cuts[:-1], cuts[1:], strict=True):
+        out += [float(t_s[j] - t_s[i]), float(m_kg[i] - m_kg[j])]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=20, help="initial states (default 20)")
+    ap.add_argument("--seed", type=int, default=0, help="episode seed of the first state")
+    ap.add_argument("--fractions", type=float, nargs="+", default=[1.0, 0.95, 0.9, 0.85])
+    ap.add_argument(
+        "--agents",
+        nargs="+",
+        default=["models/pd_dqn_robust.pt", "controller:zemzev", "shield:controller:zemzev"],
+        help="pd-eval agent specs flown in part 2",
+    )
+    a = ap.parse_args()
+    if a.episodes < 1 or not all(0.5 <= f <= 1.0 for f in a.fractions):
+        ap.error("--episodes must be >= 1 and every --fractions value in [0.5, 1]")
+
+    starts = rollout(make_controller("zemzev"), a.episodes, a.seed).initial_states
+    print(f"Part 1: fuel-optimal landings from {a.episodes} nominal states (seed {a.seed})")
+    print(f"{'vertical max':>12} {'fuel p50 kg':>11} {'t_f p50 s':>9} {'ratio p50':>9}  min    max")
+    optimum, top, solved = None, 1.0, {}
+    for f in sorted(a.fractions, reverse=True):
+        sols = [ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=capped(f)) for s in starts]
+        fuel = np.array([r.fuel for r in sols])
+        if optimum is None:  # the largest fraction is the reference (1.0 by default)
+            optimum, top = fuel, f
+        solved[f] = sols
+        ratio = fuel / optimum
+        tf = np.median([r.time_of_flight for r in sols])
+        print(
+            f"{f:>12.2f} {np.median(fuel):>11.1f} {tf:>9.1f} {np.median(ratio):>9.3f} "
+            f"{ratio.min():>6.3f} {ratio.max():>6.3f}"
+        )
+    print(f"\nPart 2: agents on the same states, fuel against the optimum at {top:.2f}")
+    names = [f"z>{BANDS_M[0]:.0f}"] + [
+        f"{lo:.0f}-{hi:.0f}" for hi, lo in zip(BANDS_M[:-1], BANDS_M[1:], strict=True)
+    ]
+    names.append(f"z<{BANDS_M[-1]:.0f}")
+    band_head = " ".join(f"{n + ' s/kg':>14}" for n in names)
+    print(f"{'agent':<28} {'fuel/opt p50':>12} {'flight s':>8} {band_head}")
+    rows = [
+        (
+            f"fuel-optimal, {f:.2f} vertical",
+            [r.fuel for r in sols],
+            [r.time_of_flight for r in sols],
+            [bands(r.states[:, 2], r.state_times, r.states[:, 6]) for r in sols],
+        )
+        for f, sols in solved.items()
+    ]
+    for spec in a.agents:
+        actor, label = load_actor(spec)
+        ro = rollout(actor, a.episodes, a.seed, keep_trajectories=a.episodes)
+        if not ro.landed.all():
+            label += f" ({ro.landed.mean() * 100:.0f} % landed)"
+        t = np.arange(max(len(p) for p in ro.trajectories)) * DT_S
+        split = [bands(p[:, 2], t[: len(p)], p[:, 6]) for p in ro.trajectories]
+        rows.append((label, ro.fuel_kg, ro.steps * DT_S, split))
+    for label, fuel, flight, split in rows:
+        med = np.median(np.array(split), axis=0)
+        cells = " ".join(f"{med[k]:>6.1f} / {med[k + 1]:>5.1f}" for k in range(0, len(med), 2))
+        print(
+            f"{label[:28]:<28} {np.median(np.asarray(fuel) / optimum):>12.3f} "
+            f"{np.median(flight):>8.1f} {cells}"
+        )
+
+
+if __name__ == "__main__":
+    main()
