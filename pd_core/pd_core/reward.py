@@ -9,6 +9,7 @@ r_hat / max(|r_hat|, min_range) (Eq. 13; on the pad the target velocity is 0).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +39,12 @@ def target_velocity(
     return gain[..., None] * r_hat
 
 
+def landing_bonus(miss_ij_m: Any, cfg: RewardConfig = REWARD) -> Any:
+    """Bonus of a landing `miss_ij_m` (m, float or array) from the pad: kappa (Eq. 12), plus the
+    optional `precision_bonus` (ours, 0 in the paper) that rises towards the pad."""
+    return cfg.kappa + cfg.precision_bonus * (1.0 - miss_ij_m / cfg.x_lim_m)
+
+
 def landed(
     position_m: np.ndarray, velocity_mps: np.ndarray, cfg: RewardConfig = REWARD
 ) -> np.ndarray:
@@ -65,10 +72,7 @@ def reward(
     v_err = _norm(velocity_mps - target_velocity(position_m, velocity_mps, cfg))
     effort = _norm(thrust_n / t_max)
     ok = landed(position_m, velocity_mps, cfg) if landed_mask is None else landed_mask
-    bonus = np.where(ok, cfg.kappa, 0.0)
-    if cfg.precision_bonus:
-        miss = _norm(position_m[..., 0:2])
-        bonus = bonus + np.where(ok, cfg.precision_bonus * (1.0 - miss / cfg.x_lim_m), 0.0)
+    bonus = np.where(ok, landing_bonus(_norm(position_m[..., 0:2]), cfg), 0.0)
     return cfg.alpha * v_err + cfg.beta * effort + cfg.eta + bonus
 
 
@@ -100,9 +104,7 @@ def reward_scalar(
         and math.sqrt(x * x + y * y + z * z) < cfg.x_lim_m
         and speed < cfg.v_lim_mps
     )
-    bonus = 0.0
-    if ok:
-        bonus = cfg.kappa + cfg.precision_bonus * (1.0 - math.sqrt(x * x + y * y) / cfg.x_lim_m)
+    bonus = landing_bonus(math.sqrt(x * x + y * y), cfg) if ok else 0.0
     r = (
         cfg.alpha * math.sqrt(ex * ex + ey * ey + ez * ez)
         + cfg.beta * math.sqrt(fx * fx + fy * fy + fz * fz)
