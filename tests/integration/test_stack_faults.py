@@ -87,6 +87,12 @@ class Probe:
         return future.result()
 
 
+def state_links(sim_log: str) -> int:
+    """Subscribers the simulator's state publisher has matched, as it last logged them."""
+    found = re.findall(r"links: (\d+) subscriber\(s\) of /lander/state", sim_log)
+    return int(found[-1]) if found else 0
+
+
 def start_recorder(procs: ProcessSet, bag, name: str):
     rec = procs.start(name, [executable("pd_bringup", "pd_record"), "-o", str(bag)])
     assert rec.wait_log("recording", START_S), rec.log()
@@ -100,6 +106,10 @@ def test_lockstep_auto_restart_recorded_without_loss(stack, make_node, spin_unti
     killed = start_recorder(procs, tmp / "killed", "pd_record_killed")
     # policy + 2 recorders + probe on the states; simulator + 2 recorders + probe on commands
     assert spin_until(lambda: probe.matched(4), 30.0), procs.logs()
+    # ... and matched by the simulator's own state writer (its `links` log line), which can
+    # lag what the probe's graph shows by seconds: a lockstep episode takes 0.3 s, so a
+    # recorder matched late misses whole episodes and the bag falls short of the load
+    assert spin_until(lambda: state_links(stack["sim"].log()) >= 4, 30.0), procs.logs()
     spin_until(lambda: False, 1.0)  # discovery settles both ways
     first = probe.reset(seed=5).episode
 
