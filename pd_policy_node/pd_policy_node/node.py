@@ -2,7 +2,8 @@
 
 The controller is the trained DQN policy (`controller` dqn, the default; loaded with
 `pd_core.load_policy` from `model_path`) or a reference controller of
-`pd_core.controllers.make_controller` (zemzev, and the MPC teachers where pd_core has them).
+`pd_core.controllers.make_controller` (zemzev, zemzev-vernier, and the MPC teachers where pd_core
+has them).
 A missing or mismatched model, or an unknown controller, stops the node at start-up with one line
 naming the file or the name and what is wrong (exit status 1; a bad parameter type is status 2).
 A state with NaN, infinite or absurd values is logged and gets no command; a state whose status is
@@ -48,8 +49,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "controller": (
         DQN,
         "What answers the states: 'dqn' (the trained policy of model_path) or a reference "
-        "controller of pd_core.controllers.make_controller ('zemzev', 'mpc-fuel', "
-        "'mpc-energy' where pd_core has them).",
+        "controller of pd_core.controllers.make_controller ('zemzev', 'zemzev-vernier', "
+        "'mpc-fuel', 'mpc-energy' where pd_core has them).",
     ),
     "model_path": (
         "",

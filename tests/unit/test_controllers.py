@@ -1,11 +1,13 @@
 """ZEM/ZEV reference controller: its braking profile stays within the thrust a lander has, its
-vertical loop survives a step of delay, and it slows down for a lateral error it cannot null."""
+vertical loop survives a step of delay, it slows down for a lateral error it cannot null, and
+its terminal vernier lands on the pad."""
 
 import numpy as np
 import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
 from pd_core.controllers import (
+    VERNIER_PARAMS,
     ZemZevController,
     ZemZevParams,
     braking_accel_mps2,
@@ -13,7 +15,8 @@ from pd_core.controllers import (
     profile_accel_for_time_mps2,
 )
 from pd_core.dispersions import SCENARIOS, Dispersions
-from pd_core.evaluate import rollout
+from pd_core.evaluate import final_quantities, rollout
+from pd_core.shield import ShieldedActor
 
 
 def test_braking_profile_is_the_nominal_one_up_to_the_thrust_the_mass_allows():
@@ -80,3 +83,35 @@ def test_landers_far_off_sideways_slow_their_descent_and_land():
     assert rollout(ZemZevController(), n, 0, initial_states=s).landed.all()
     unlimited = ZemZevController(ZemZevParams(lateral_limit=False))
     assert rollout(unlimited, n, 0, initial_states=s).landed.mean() < 0.2
+
+
+def test_vernier_tracks_a_capped_speed_towards_the_pad_only_below_its_altitude():
+    """Below 5 m (above the 0.5 m flare): a = 2/s (clip(-r / 1 s, +-0.4 m/s) - v) sideways."""
+    c = ZemZevController(VERNIER_PARAMS)
+    s = np.array(
+        [
+            [3.0, -0.1, 3.0, 0.0, 0.2, -0.5, 1700.0],  # far off in i: capped at 0.4 m/s
+            [3.0, -0.1, 6.0, 0.0, 0.2, -0.5, 1700.0],  # above the vernier: ZEM/ZEV's command
+        ]
+    )
+    t = c.thrust_command(s)
+    assert t[0, 0:2] == pytest.approx(1700.0 * 2.0 * np.array([-0.4, 0.1 - 0.2]), rel=1e-12)
+    assert t[1, 0:2] == pytest.approx(ZemZevController().thrust_command(s)[1, 0:2], rel=1e-12)
+    assert c.name == "zemzev-vernier" and ZemZevController().name == "zemzev"
+    # K dt = 0.4: the sideways loop stays damped with two steps of delay (z^3 - z^2 + K dt)
+    k_dt = VERNIER_PARAMS.vernier_gain_per_s * DT_S
+    assert np.abs(np.roots([1.0, -1.0, 0.0, k_dt])).max() < 0.95
+
+
+def test_vernier_lands_nearer_the_pad_than_zemzev():
+    """ZEM/ZEV's t_go floor (3 s) outlasts the last metres: it overshoots the pad (1.28 m median
+    behind the shield, seed 0); the vernier lands within 0.42 m, as often and as softly."""
+    out = {}
+    for name, params in (("zemzev", ZemZevParams()), ("vernier", VERNIER_PARAMS)):
+        ro = rollout(ShieldedActor(ZemZevController(params)), 300, seed=0)
+        q = final_quantities(ro)
+        assert ro.landed.all()
+        assert q["k_velocity_mps"].min() > -1.0
+        out[name] = np.median(q["norm_ij_position_m"])
+    assert out["zemzev"] > 1.1
+    assert out["vernier"] < 0.6

@@ -53,7 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("model", nargs="?", help="policy file (.pt with its .json beside it)")
-    p.add_argument("--controller", help="evaluate a reference controller instead (zemzev)")
+    p.add_argument(
+        "--controller",
+        help="evaluate a reference controller instead (zemzev, zemzev-vernier, mpc-fuel, "
+        "mpc-energy)",
+    )
     p.add_argument("--episodes", type=int, default=1000, help="evaluation episodes")
     p.add_argument("--seed", type=int, default=0, help="episode i uses env seed seed + i")
     p.add_argument("--no-disturbance", action="store_true", help="turn the disturbance force off")
