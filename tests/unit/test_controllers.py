@@ -11,6 +11,7 @@ from pd_core.controllers import (
     ZemZevController,
     ZemZevParams,
     braking_accel_mps2,
+    make_controller,
     min_time_to_rest_s,
     profile_accel_for_time_mps2,
 )
@@ -98,6 +99,7 @@ def test_vernier_tracks_a_capped_speed_towards_the_pad_only_below_its_altitude()
     assert t[0, 0:2] == pytest.approx(1700.0 * 2.0 * np.array([-0.4, 0.1 - 0.2]), rel=1e-12)
     assert t[1, 0:2] == pytest.approx(ZemZevController().thrust_command(s)[1, 0:2], rel=1e-12)
     assert c.name == "zemzev-vernier" and ZemZevController().name == "zemzev"
+    assert make_controller("zemzev-vernier").params == VERNIER_PARAMS
     # K dt = 0.4: the sideways loop stays damped with two steps of delay (z^3 - z^2 + K dt)
     k_dt = VERNIER_PARAMS.vernier_gain_per_s * DT_S
     assert np.abs(np.roots([1.0, -1.0, 0.0, k_dt])).max() < 0.95
