@@ -89,16 +89,18 @@ def offline(
     return states
 
 
-@pytest.mark.parametrize("shield", ["file", "always"])
-def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, shield):
+@pytest.mark.parametrize(
+    ("name", "shield"), [("zemzev", "file"), ("zemzev", "always"), ("zemzev-vernier", "always")]
+)
+def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, name, shield):
     """shield "always" puts the reference controller behind the braking shield, as offline."""
     loop = Loop(make_node, spin_until)
-    episode, policy = loop.fly(sim, "zemzev", seed=8, shield=shield)
+    episode, policy = loop.fly(sim, name, seed=8, shield=shield)
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
     assert ("braking shield ShieldParams(" in policy.log()) == (shield == "always")
     result = next(r for r in loop.results if r.episode == episode)
-    expected = offline("zemzev", 8, shield=shield)
+    expected = offline(name, 8, shield=shield)
     assert result.landed, result.reason
     assert result.steps == len(expected) - 1 and result.rejected_commands == 0
     np.testing.assert_array_equal(final_state(result), expected[-1])
