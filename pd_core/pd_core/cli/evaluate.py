@@ -32,6 +32,7 @@ from pd_core.campaign import (
     write_json,
 )
 from pd_core.config import DT_S
+from pd_core.controllers import CONTROLLERS
 from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
 from pd_core.evaluate import (
     Rollouts,
@@ -55,8 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", nargs="?", help="policy file (.pt with its .json beside it)")
     p.add_argument(
         "--controller",
-        help="evaluate a reference controller instead (zemzev, zemzev-vernier, mpc-fuel, "
-        "mpc-energy)",
+        help=f"evaluate a reference controller instead ({', '.join(CONTROLLERS)})",
     )
     p.add_argument("--episodes", type=int, default=1000, help="evaluation episodes")
     p.add_argument("--seed", type=int, default=0, help="episode i uses env seed seed + i")
