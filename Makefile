@@ -8,13 +8,14 @@ IN_ENV := scripts/in_env.sh
 PYTEST_ARGS ?=
 ARGS ?=
 
-.PHONY: help setup test lint pytest demo train bench clean distclean
+.PHONY: help setup test lint pytest demo train recipe bench clean distclean
 
 help:
 	@echo "make setup      build .venv and ros2_ws (idempotent; skips work by stamp)"
 	@echo "make demo       fly the lander (FAST=1 for the short version)"
 	@echo "make test       ruff check + ruff format --check + pytest tests/  (PYTEST_ARGS=...)"
 	@echo "make train      pd-train \$$(ARGS)"
+	@echo "make recipe     the 60 min training recipe, one seed (SEED=1; ARGS=--help for more)"
 	@echo "make bench      run every bench/*.py"
 	@echo "make clean      remove ros2_ws build/install/log and caches (distclean: also .venv)"
 
@@ -41,6 +42,10 @@ demo: setup
 
 train: setup
 	$(IN_ENV) pd-train $(ARGS)
+
+# pd_dqn_robust.md's 60 min recipe: three pd-train stages, runs under runs/recipe__$(SEED)
+recipe: setup
+	$(IN_ENV) scripts/train_recipe.sh --seed $(or $(SEED),1) $(ARGS)
 
 bench: setup
 	@shopt -s nullglob; files=(bench/*.py); \

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# The 60 min training recipe of models/pd_dqn_robust.md, one seed, three pd-train stages:
+#   1. `best` preset from scratch (20 min);
+#   2. fine-tune under the `broad` dispersions from the zemzev-vernier teacher, behind the
+#      braking shield, with the landing bonus (25 min, demonstrations included);
+#   3. the same again from stage 2's best.pt (11 min). The recipe's policy is stage 3's final.pt.
+# A stage whose run directory already holds final.pt is skipped, so an interrupted recipe
+# restarts at the stage it was in.
+set -euo pipefail
+
+usage() {
+    cat <<'EOF'
+usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--dry-run] [-h]
+
+  --seed S         training seed of every stage (default 1)
+  --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
+  --stage1 FILE    skip stage 1 and start stage 2 from this policy (e.g. models/pd_dqn_best.pt,
+                   a 20 min snapshot of stage 1 with seed 1)
+  --dry-run        print the pd-train command of each stage, one per line, and run nothing
+
+Each stage uses one torch thread, so two seeds can train side by side on two cores. The
+policy is DIR/stage3/final.pt; evaluate it with
+  pd-eval DIR/stage3/final.pt --dispersions standard --episodes 1000
+EOF
+}
+
+seed=1
+out=""
+stage1=""
+dry=0
+while [[ $# -gt 0 ]]; do
+    case "$1" in
+        -h | --help) usage; exit 0 ;;
+        --seed) seed="${2:?--seed needs a value}"; shift 2 ;;
+        --out) out="${2:?--out needs a directory}"; shift 2 ;;
+        --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
+        --dry-run) dry=1; shift ;;
+        *) echo "train_recipe.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    esac
+done
+[[ "$seed" =~ ^[0-9]+$ ]] || { echo "train_recipe.sh: --seed must be a non-negative integer, got '$seed'" >&2; exit 2; }
+[[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
+out="${out:-runs/recipe__$seed}"
+
+FINE_TUNE=(--preset robust --controller zemzev-vernier --precision-bonus 10
+    --recovery-failed-share 0.5 --shield --dispersions broad)
+start=$SECONDS
+
+stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
+    local name=$1
+    shift
+    local cmd=(pd-train "$@" --seed "$seed" --torch-threads 1 --run-dir "$out/$name")
+    if ((dry)); then
+        echo "${cmd[*]}"
+        return
+    fi
+    if [[ -f "$out/$name/final.pt" ]]; then
+        echo "== $name: $out/$name/final.pt exists, skipped"
+        return
+    fi
+    echo "== $name: ${cmd[*]}"
+    local t0=$SECONDS
+    "${cmd[@]}"
+    echo "== $name: $(((SECONDS - t0) / 60)) min $(((SECONDS - t0) % 60)) s"
+}
+
+if [[ -z "$stage1" ]]; then
+    stage stage1 --preset best --max-minutes 20
+    stage1="$out/stage1/best.pt"
+fi
+stage stage2 "${FINE_TUNE[@]}" --init-policy "$stage1" --max-minutes 25
+stage stage3 "${FINE_TUNE[@]}" --init-policy "$out/stage2/best.pt" --max-minutes 11
+((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/final.pt"

@@ -1,0 +1,84 @@
+"""scripts/train_recipe.sh: its stages are valid pd-train configurations chained file to file,
+finished stages are skipped (an interrupted recipe restarts where it was), and a bad flag is one
+line."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from pd_core.cli import train as pd_train
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "train_recipe.sh"
+
+
+def recipe(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["bash", str(SCRIPT), *args], capture_output=True, text=True, timeout=60, check=False
+    )
+
+
+def stage_configs(capsys, *args: str) -> list[dict]:
+    """The resolved pd-train config of each stage the dry run prints."""
+    out = recipe("--dry-run", *args)
+    assert out.returncode == 0, out.stderr
+    configs = []
+    for line in out.stdout.strip().splitlines():
+        argv = shlex.split(line)
+        assert argv[0] == "pd-train", line
+        assert pd_train.main([*argv[1:], "--print-config"]) == 0
+        configs.append(json.loads(capsys.readouterr().out))
+    return configs
+
+
+def test_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(tmp_path, capsys):
+    out = tmp_path / "r"
+    s1, s2, s3 = stage_configs(capsys, "--seed", "7", "--out", str(out))
+    assert s1["preset"] == "best" and s1["init_policy"] in ("", None)
+    for cfg in (s2, s3):
+        assert cfg["preset"] == "robust" and cfg["controller"] == "zemzev-vernier"
+        assert cfg["shield"] is True and cfg["dispersions"] == "broad"
+        assert cfg["precision_bonus"] == pytest.approx(10.0)
+    assert s2["init_policy"] == f"{out}/stage1/best.pt"
+    assert s3["init_policy"] == f"{out}/stage2/best.pt"
+    assert [c["seed"] for c in (s1, s2, s3)] == [7, 7, 7]
+    assert [c["run_dir"] for c in (s1, s2, s3)] == [f"{out}/stage{k}" for k in (1, 2, 3)]
+    # the wall-time budgets (demonstrations included) stay inside the 60 min target
+    assert sum(c["max_minutes"] for c in (s1, s2, s3)) <= 60.0
+
+
+def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
+    start = tmp_path / "start.pt"
+    start.write_bytes(b"")
+    s2, s3 = stage_configs(capsys, "--stage1", str(start), "--out", str(tmp_path / "r"))
+    assert s2["init_policy"] == str(start)
+    assert s3["init_policy"] == f"{tmp_path}/r/stage2/best.pt"
+
+
+def test_finished_stages_are_skipped(tmp_path):
+    for k in (1, 2, 3):
+        (tmp_path / f"stage{k}").mkdir()
+        (tmp_path / f"stage{k}" / "final.pt").write_bytes(b"")
+    out = recipe("--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("exists, skipped") == 3
+    assert f"{tmp_path}/stage3/final.pt" in out.stdout.splitlines()[-1]
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["--seed", "x"], "--seed must be a non-negative integer"),
+        (["--bogus"], "unknown argument '--bogus'"),
+        (["--stage1", "/nonexistent.pt"], "--stage1 file not found"),
+    ],
+)
+def test_bad_flag_is_one_line(args, named):
+    out = recipe(*args)
+    assert out.returncode == 2
+    err = out.stderr.strip().splitlines()
+    assert len(err) == 1 and named in err[0], err
