@@ -12,7 +12,8 @@ land for less than the f row: its ratio to the full-thrust optimum is the floor 
 Part 2: each agent (`pd-eval` specs: a policy file, `controller:NAME`, `shield:controller:NAME`)
 flies the same episodes (disturbances on). Printed per agent: median fuel / fuel-optimal, flight
 time, and the time and fuel spent in each altitude band (above 500 m, 500-20 m, below 20 m)
-beside the optimum's, to show where the extra fuel goes.
+beside the optimum's, and the fuel burnt by the lateral (i, j) and the vertical (k) thrusters
+(Eq. 3 burns |T_i| + |T_j| + |T_k|), to show where the extra fuel goes.
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
+from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
 from pd_core.campaign import load_actor  # noqa: E402
-from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
+from pd_core.config import DT_S, G0_MPS2, ISP_S, RL_THRUST, ThrustLimits  # noqa: E402
 from pd_core.controllers import make_controller  # noqa: E402
 from pd_core.evaluate import rollout  # noqa: E402
 
@@ -46,6 +48,15 @@ def bands(z_m: np.ndarray, t_s: np.ndarray, m_kg: np.ndarray) -> list[float]:
     for i, j in zip(cuts[:-1], cuts[1:], strict=True):
         out += [float(t_s[j] - t_s[i]), float(m_kg[i] - m_kg[j])]
     return out
+
+
+def axis_split(thrust_n: np.ndarray, dt_s: np.ndarray, total_kg: float) -> list[float]:
+    """[lateral kg, vertical kg] burnt by thrusts (n, 3) held dt_s (n,), scaled to total_kg
+    (the OCP's thrust is a spline between control points: its control points give the shares)."""
+    burn = np.abs(thrust_n) * np.asarray(dt_s)[:, None] / (ISP_S * G0_MPS2)
+    lateral, vertical = burn[:, 0:2].sum(), burn[:, 2].sum()
+    scale = total_kg / max(lateral + vertical, 1e-9)
+    return [float(lateral * scale), float(vertical * scale)]
 
 
 def main() -> None:
@@ -85,13 +96,17 @@ def main() -> None:
     ]
     names.append(f"z<{BANDS_M[-1]:.0f}")
     band_head = " ".join(f"{n + ' s/kg':>14}" for n in names)
-    print(f"{'agent':<28} {'fuel/opt p50':>12} {'flight s':>8} {band_head}")
+    print(f"{'agent':<28} {'fuel/opt p50':>12} {'flight s':>8} {band_head} {'i,j / k kg':>14}")
     rows = [
         (
             f"fuel-optimal, {f:.2f} vertical",
             [r.fuel for r in sols],
             [r.time_of_flight for r in sols],
-            [bands(r.states[:, 2], r.state_times, r.states[:, 6]) for r in sols],
+            [
+                bands(r.states[:, 2], r.state_times, r.states[:, 6])
+                + axis_split(r.thrust, np.diff(r.control_times, append=r.time_of_flight), r.fuel)
+                for r in sols
+            ],
         )
         for f, sols in solved.items()
     ]
@@ -101,7 +116,11 @@ def main() -> None:
         if not ro.landed.all():
             label += f" ({ro.landed.mean() * 100:.0f} % landed)"
         t = np.arange(max(len(p) for p in ro.trajectories)) * DT_S
-        split = [bands(p[:, 2], t[: len(p)], p[:, 6]) for p in ro.trajectories]
+        split = [
+            bands(p[:, 2], t[: len(p)], p[:, 6])
+            + axis_split(DEFAULT_ACTIONS.thrust(act), np.full(len(act), DT_S), p[0, 6] - p[-1, 6])
+            for p, act in zip(ro.trajectories, ro.actions, strict=True)
+        ]
         rows.append((label, ro.fuel_kg, ro.steps * DT_S, split))
     for label, fuel, flight, split in rows:
         med = np.median(np.array(split), axis=0)
