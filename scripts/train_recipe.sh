@@ -4,8 +4,9 @@
 #   2. fine-tune under the `broad` dispersions from the zemzev-vernier teacher, behind the
 #      braking shield, with the landing bonus (25 min, demonstrations included);
 #   3. the same again from stage 2's best.pt (11 min). The recipe's policy is stage 3's final.pt.
-# A stage whose run directory already holds final.pt is skipped, so an interrupted recipe
-# restarts at the stage it was in.
+# A stage whose run directory already holds final.pt is skipped, and one that holds only a
+# checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
+# recipe goes on where it stopped.
 set -euo pipefail
 
 usage() {
@@ -57,6 +58,10 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
     if [[ -f "$out/$name/final.pt" ]]; then
         echo "== $name: $out/$name/final.pt exists, skipped"
         return
+    fi
+    if [[ -f "$out/$name/checkpoint.pt" ]]; then
+        cmd=(pd-train --resume "$out/$name" --torch-threads 1)
+        echo "== $name: resuming from $out/$name/checkpoint.pt"
     fi
     echo "== $name: ${cmd[*]}"
     local t0=$SECONDS

@@ -69,6 +69,21 @@ def test_finished_stages_are_skipped(tmp_path):
     assert f"{tmp_path}/stage3/final.pt" in out.stdout.splitlines()[-1]
 
 
+def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
+    (tmp_path / "stage1").mkdir()
+    (tmp_path / "stage1" / "final.pt").write_bytes(b"")
+    (tmp_path / "stage2").mkdir()
+    (tmp_path / "stage2" / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    out = recipe("--out", str(tmp_path))
+    # stage 1 is skipped, stage 2 goes to `pd-train --resume`, which refuses the broken file
+    # in one line, and the recipe stops there (stage 3 never starts)
+    assert out.returncode == 2
+    assert "stage1/final.pt exists, skipped" in out.stdout
+    assert f"pd-train --resume {tmp_path}/stage2" in out.stdout
+    assert "stage3" not in out.stdout
+    assert "cannot resume" in out.stderr
+
+
 @pytest.mark.parametrize(
     ("args", "named"),
     [
