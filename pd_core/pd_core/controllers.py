@@ -44,7 +44,6 @@ class ZemZevParams:
     flare_altitude_m: float = 0.5  # below this, horizontal axes only null velocity
     vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
     final_slope_per_s: float = 0.3  # near the pad descend no faster than land + this * z
-    law: str = "zemzev"  # horizontal law: "zemzev" or "vtrack" (v_ref = -r / t_go)
     # terminal vernier (0 m: off, the original law): between the flare and this altitude the
     # horizontal axes track v_ref = clip(-r / tau, +-cap) with a velocity gain. See below.
     vernier_altitude_m: float = 0.0
@@ -142,10 +141,7 @@ class ZemZevController:
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])
         # time left on the braking profile (the coast before it is ignored: t_go is an estimate)
         tgo = np.maximum((brake - p.land_speed_mps) / a_brake, p.min_tgo_s)
-        if p.law == "zemzev":
-            a_h = -6.0 * r[:, 0:2] / tgo[:, None] ** 2 - 4.0 * v[:, 0:2] / tgo[:, None]
-        else:
-            a_h = p.vel_gain_per_s * (-r[:, 0:2] / tgo[:, None] - v[:, 0:2])
+        a_h = -6.0 * r[:, 0:2] / tgo[:, None] ** 2 - 4.0 * v[:, 0:2] / tgo[:, None]
         if p.vernier_altitude_m > 0.0:
             v_ref = np.clip(-r[:, 0:2] / p.vernier_tau_s, -p.vernier_speed_mps, p.vernier_speed_mps)
             vernier = (r[:, 2] < p.vernier_altitude_m)[:, None]
