@@ -28,8 +28,9 @@ import numpy as np  # noqa: E402
 from pd_core import ocp  # noqa: E402
 from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
 from pd_core.campaign import load_actor  # noqa: E402
-from pd_core.config import DT_S, G0_MPS2, ISP_S, RL_THRUST, ThrustLimits  # noqa: E402
+from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
 from pd_core.controllers import make_controller  # noqa: E402
+from pd_core.dynamics import mass_flow_kgps  # noqa: E402
 from pd_core.evaluate import rollout  # noqa: E402
 
 BANDS_M = (500.0, 20.0)  # part 2 splits each flight at these altitudes
@@ -53,8 +54,8 @@ def bands(z_m: np.ndarray, t_s: np.ndarray, m_kg: np.ndarray) -> list[float]:
 def axis_split(thrust_n: np.ndarray, dt_s: np.ndarray, total_kg: float) -> list[float]:
     """[lateral kg, vertical kg] burnt by thrusts (n, 3) held dt_s (n,), scaled to total_kg
     (the OCP's thrust is a spline between control points: its control points give the shares)."""
-    burn = np.abs(thrust_n) * np.asarray(dt_s)[:, None] / (ISP_S * G0_MPS2)
-    lateral, vertical = burn[:, 0:2].sum(), burn[:, 2].sum()
+    lateral = float((mass_flow_kgps(thrust_n[:, 0:2]) * dt_s).sum())
+    vertical = float((mass_flow_kgps(thrust_n[:, 2:3]) * dt_s).sum())
     scale = total_kg / max(lateral + vertical, 1e-9)
     return [float(lateral * scale), float(vertical * scale)]
 
