@@ -136,6 +136,7 @@ STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
 GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.shield)
+HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
 
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
 

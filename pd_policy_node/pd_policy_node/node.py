@@ -220,7 +220,7 @@ class PolicyNode(Node):
     def _counts(self) -> str:
         shielded = getattr(self.policy, "shield_fired", 0)
         return (
-            f"{self.answered} answered ({shielded} by the braking shield), {self.repeats} "
+            f"{self.answered} answered ({shielded} overridden by the shield), {self.repeats} "
             f"repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), {self.lost} "
             "lost (DDS) states in all"
         )

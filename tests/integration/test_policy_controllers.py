@@ -112,7 +112,7 @@ def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
     assert "braking shield ShieldParams(thrust_margin=0.9" in policy.log(), policy.log()
-    assert "by the braking shield" in policy.log(), policy.log()
+    assert "overridden by the shield" in policy.log(), policy.log()
     result = next(r for r in loop.results if r.episode == episode)
     expected = offline("dqn", 11)
     assert result.landed, result.reason

@@ -1,10 +1,13 @@
 """Braking shield: its limit is the braking law it claims, it only touches the vertical axis, it
 saves a policy that never brakes, its touchdown guard stops free fall near the pad under delay,
-and policy files, pd-eval specs and training carry it."""
+it hands the teacher the states where the teacher's lateral limit binds, and policy files,
+pd-eval specs and training carry it."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,13 +17,16 @@ from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.campaign import load_actor
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
 from pd_core.controllers import make_controller
+from pd_core.dispersions import load_scenarios
 from pd_core.dqn.network import QNetwork
 from pd_core.dynamics import step
+from pd_core.evaluate import rollout
 from pd_core.policy import PolicyLoadError, load_policy, save_policy
 from pd_core.shield import (
     ShieldedActor,
     ShieldParams,
     guard_mask,
+    handover_mask,
     max_descent_speed_mps,
     shield_actions,
     shield_mask,
@@ -30,7 +36,8 @@ torch.set_num_threads(1)
 G = -GRAVITY_MPS2[2]
 TZ = RL_THRUST.max_n[2]
 P = ShieldParams()
-BRAKE_ONLY = ShieldParams(guard_altitude_m=0.0)
+BRAKE_ONLY = ShieldParams(guard_altitude_m=0.0, handover_altitude_m=0.0)
+ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
 
 
 def test_limit_is_the_margin_braking_law():
@@ -130,6 +137,46 @@ def test_the_guard_keeps_a_delayed_bang_bang_hover_soft():
     assert touchdown[P] < 1.0
 
 
+def test_handover_gives_the_teacher_only_lateral_limited_states_above_5_m():
+    """A lander 1.8 km off sideways and still moving away needs 45 s of full lateral thrust
+    to stop on the pad; the 2.5 m/s^2 profile leaves it 15 s from 300 m, so the teacher slows
+    the descent and flies it. A Table 3 state, the same state below 5 m, or a handover altitude
+    of 0 keep the policy's action (the shield's own limits still apply)."""
+    s = np.array(
+        [
+            [0.0, -1800.0, 300.0, 0.0, -40.0, -40.0, 1800.0],  # corner, drifting away
+            [700.0, 0.0, 2500.0, -40.0, 0.0, -80.0, 2000.0],  # Table 3
+            [0.0, -1800.0, 4.0, 0.0, -40.0, -1.0, 1800.0],  # below the handover altitude
+        ]
+    )
+    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, P), [True, False, False])
+    assert not handover_mask(
+        s, RL_THRUST.max_n, dataclasses.replace(P, handover_altitude_m=0)
+    ).any()
+    keep = DEFAULT_ACTIONS.levels_to_action(np.array([[3, 3, 2]] * 3))  # no lateral thrust
+    out, overridden = shield_actions(keep, s, DEFAULT_ACTIONS, P)
+    teacher = make_controller("zemzev-vernier").act_batch(s[:1])
+    want = shield_actions(teacher, s[:1], DEFAULT_ACTIONS, BRAKE_ONLY)[0]
+    assert out[0] == want[0] and overridden[0]
+    assert DEFAULT_ACTIONS.level_table[out[0], 1] == 6  # full +y thrust, back towards the pad
+    np.testing.assert_array_equal(out[1:], keep[1:])
+
+
+def test_the_shipped_policy_lands_the_wide_box_corners_it_lost_without_the_handover():
+    """The six wide-box episodes of 10 000 (seed 50000000) that the shipped student lost: from
+    the box's corners, drifting away, touching down 1.6-4.8 m/s sideways. Behind the handover
+    the teacher finishes the divert."""
+    box = load_scenarios("wide-box")[0]
+    seeds = [50_000_000 + i for i in (1544, 3680, 7318, 7464, 8466, 8729)]
+    landed = {}
+    for alt in (0.0, 5.0):
+        policy = load_policy(ROBUST)
+        policy.shield = dataclasses.replace(policy.shield, handover_altitude_m=alt)
+        ro = rollout(policy, len(seeds), 0, dispersions=box, episode_seeds=seeds)
+        landed[alt] = int(ro.landed.sum())
+    assert landed == {0.0: 0, 5.0: 6}
+
+
 @pytest.fixture()
 def files(tmp_path):
     torch.manual_seed(3)
@@ -163,6 +210,7 @@ def test_bad_shield_metadata_is_refused_in_one_line(files):
     for bad, says in (
         ({"thrust_margin": 1.5}, "thrust_margin must be in"),
         ({"guard_altitude_m": -1}, "guard_altitude_m must be in"),
+        ({"handover_altitude_m": -5}, "handover_altitude_m must be in"),
         ({"gain": 1}, "gain"),
     ):
         meta["shield"] = bad
