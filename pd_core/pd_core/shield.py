@@ -3,7 +3,7 @@
 A Q-network is trusted only where it was trained. Under dispersions its worst failures are not
 near misses but landers that keep falling at 90-100 m/s until the thrust left can no longer stop
 them (a 2200 kg lander with 5 % less thrust has 1.9 m/s^2 of net braking: 2.5 km to stop from
-98 m/s). The shield overrides only the vertical thrust, and only when the observed state
+98 m/s). Its braking limit overrides only the vertical thrust, and only when the observed state
 would descend faster than the fastest speed from which a fraction `thrust_margin` of full
 vertical thrust still brakes to `land_speed_mps` at the pad:
 
@@ -144,7 +144,7 @@ def handover_mask(states: np.ndarray, max_thrust_n: np.ndarray, p: ShieldParams)
     """(B,) True where the (observed) physical states (B, 7) are above the handover altitude and
     the teacher's lateral limit binds: the profile whose descent lasts as long as full lateral
     thrust (`max_thrust_n` (3,), N) needs to bring the sideways motion to rest at the pad brakes
-    more gently than the teacher's own (`pd_core.controllers.ZemZevController`)."""
+    more gently than the teacher's own, which then follows it (`ZemZevController`)."""
     s = np.atleast_2d(states)
     if p.handover_altitude_m <= 0.0:
         return np.zeros(len(s), dtype=bool)
@@ -155,7 +155,8 @@ def handover_mask(states: np.ndarray, max_thrust_n: np.ndarray, p: ShieldParams)
         np.maximum(s[:, 2], 0.0), t_lat, VERNIER_PARAMS.land_speed_mps
     )
     a_brake = braking_accel_mps2(m, VERNIER_PARAMS, float(hi[2]))
-    return (s[:, 2] > p.handover_altitude_m) & (a_lat < a_brake)
+    binds = np.maximum(a_lat, VERNIER_PARAMS.min_brake_accel_mps2) < a_brake
+    return (s[:, 2] > p.handover_altitude_m) & binds
 
 
 def shield_actions(
