@@ -61,7 +61,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "shield": (
         "file",
         "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
-        "than it can still brake, no free fall below 10 m): 'file' as the policy file's "
+        "than it can still brake, no free fall below 10 m, the teacher above 5 m where its "
+        "lateral limit binds): 'file' as the policy file's "
         "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
