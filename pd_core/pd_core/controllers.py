@@ -110,6 +110,20 @@ def profile_accel_for_time_mps2(
     return 2.0 * (altitude_m - t * land_speed_mps) / (t * t)
 
 
+def lateral_brake_accel_mps2(
+    states: np.ndarray, params: ZemZevParams, max_thrust_n: np.ndarray
+) -> np.ndarray:
+    """Deceleration (B,) of the braking profile that leaves full lateral thrust (`max_thrust_n`
+    (3,), N) time to bring the sideways motion of physical states (B, 7) to rest at the pad,
+    floored at `min_brake_accel_mps2` (keep descending). Where it is below the profile's own
+    deceleration the teacher's lateral limit binds (also the shield's handover condition)."""
+    s = np.atleast_2d(states)
+    hi = np.asarray(max_thrust_n, dtype=float)
+    t_lat = min_time_to_rest_s(s[:, 0:2], s[:, 3:5], hi[0:2] / s[:, 6:7]).max(axis=1)
+    a_lat = profile_accel_for_time_mps2(np.maximum(s[:, 2], 0.0), t_lat, params.land_speed_mps)
+    return np.maximum(a_lat, params.min_brake_accel_mps2)
+
+
 class ZemZevController:
     """Greedy-style interface of `pd_core.policy.Policy`: `act`, `act_batch`, `thrust`."""
 
@@ -133,9 +147,7 @@ class ZemZevController:
         if p.lateral_limit:
             # a lander too far off (or too fast) sideways for full lateral thrust to null within
             # the profile's time descends slower (wide-box corners: 2.0 % lost without it)
-            t_lat = min_time_to_rest_s(r[:, 0:2], v[:, 0:2], self._hi[0:2] / m[:, None])
-            a_lat = profile_accel_for_time_mps2(z, t_lat.max(axis=1), p.land_speed_mps)
-            a_brake = np.minimum(a_brake, np.maximum(a_lat, p.min_brake_accel_mps2))
+            a_brake = np.minimum(a_brake, lateral_brake_accel_mps2(s, p, self._hi))
         brake = np.sqrt(p.land_speed_mps**2 + 2.0 * a_brake * z)
         vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])

@@ -63,8 +63,7 @@ from pd_core.controllers import (
     VERNIER_PARAMS,
     ZemZevController,
     braking_accel_mps2,
-    min_time_to_rest_s,
-    profile_accel_for_time_mps2,
+    lateral_brake_accel_mps2,
 )
 
 _G_MPS2 = float(-GRAVITY_MPS2[2])
@@ -142,20 +141,13 @@ def guard_mask(states: np.ndarray, vertical_levels: np.ndarray, p: ShieldParams)
 
 def handover_mask(states: np.ndarray, max_thrust_n: np.ndarray, p: ShieldParams) -> np.ndarray:
     """(B,) True where the (observed) physical states (B, 7) are above the handover altitude and
-    the teacher's lateral limit binds: the profile whose descent lasts as long as full lateral
-    thrust (`max_thrust_n` (3,), N) needs to bring the sideways motion to rest at the pad brakes
-    more gently than the teacher's own, which then follows it (`ZemZevController`)."""
+    the teacher's lateral limit binds (`pd_core.controllers.lateral_brake_accel_mps2` below the
+    teacher's braking deceleration at full thrust `max_thrust_n` (3,), N)."""
     s = np.atleast_2d(states)
     if p.handover_altitude_m <= 0.0:
         return np.zeros(len(s), dtype=bool)
-    hi = np.asarray(max_thrust_n, dtype=float)
-    m = s[:, 6]
-    t_lat = min_time_to_rest_s(s[:, 0:2], s[:, 3:5], hi[0:2] / m[:, None]).max(axis=1)
-    a_lat = profile_accel_for_time_mps2(
-        np.maximum(s[:, 2], 0.0), t_lat, VERNIER_PARAMS.land_speed_mps
-    )
-    a_brake = braking_accel_mps2(m, VERNIER_PARAMS, float(hi[2]))
-    binds = np.maximum(a_lat, VERNIER_PARAMS.min_brake_accel_mps2) < a_brake
+    a_brake = braking_accel_mps2(s[:, 6], VERNIER_PARAMS, float(max_thrust_n[2]))
+    binds = lateral_brake_accel_mps2(s, VERNIER_PARAMS, max_thrust_n) < a_brake
     return (s[:, 2] > p.handover_altitude_m) & binds
 
 
