@@ -137,6 +137,7 @@ BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thr
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
 GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.shield)
 HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
+MAX_DELAY_STEPS = 4  # ours: longest actuation delay (0.8 s) identified in flight (pd_core.latency)
 
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
 

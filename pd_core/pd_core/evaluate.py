@@ -134,8 +134,14 @@ def fly_episodes(
     observed = info["observed_state"]
     active = env.active
     actions = np.zeros(n, dtype=np.int64)
+    rowwise = hasattr(actor, "act_rows")  # an actor with memory per lander (pd_core.latency)
+    if rowwise:
+        actor.begin_episodes(n)
     while active.any():
-        actions[active] = actor.act_batch(observed[active])
+        if rowwise:
+            actions[active] = actor.act_rows(observed[active], np.flatnonzero(active))
+        else:
+            actions[active] = actor.act_batch(observed[active])
         _, r, te, _, info = env.step(actions)
         ret += r
         term |= te

@@ -19,7 +19,8 @@ import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, N_ACTIONS_PER_AXIS, RL_THRUST, STATE_SCALE, ThrustLimits
-from pd_core.shield import ShieldParams, shield_actions
+from pd_core.latency import CompensatesLatency
+from pd_core.shield import ShieldParams, latency_for, shield_actions
 from pd_core.state import check_state
 
 FORMAT_VERSION = 1
@@ -94,9 +95,10 @@ def _close(a: Any, b: Any) -> bool:
     return a == b
 
 
-class Policy:
+class Policy(CompensatesLatency):
     """Greedy policy of a trained Q-network, on physical states [x, y, z, vx, vy, vz, m] (SI),
-    behind the braking shield (`pd_core.shield`) if given one (`load_policy` decides)."""
+    behind the braking shield (`pd_core.shield`) if given one (`load_policy` decides), and then
+    with the latency compensation it asks for (`act_rows`, `act_online`: `pd_core.latency`)."""
 
     def __init__(
         self, network: Any, metadata: dict[str, Any], shield: ShieldParams | None = None
@@ -121,6 +123,7 @@ class Policy:
         self.shield = shield
         self.shield_fired = 0
         """steps on which the shield overrode the network (counted since loading)"""
+        self.latency = latency_for(shield)
 
     def q_values(self, state: np.ndarray) -> np.ndarray:
         """Action values (..., n_actions) of physical states (..., 7); ValueError if invalid."""

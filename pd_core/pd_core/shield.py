@@ -58,6 +58,7 @@ from pd_core.config import (
     GUARD_ALTITUDE_M,
     HANDOVER_ALTITUDE_M,
     LAND_SPEED_MPS,
+    MAX_DELAY_STEPS,
 )
 from pd_core.controllers import (
     VERNIER_PARAMS,
@@ -65,6 +66,7 @@ from pd_core.controllers import (
     braking_accel_mps2,
     lateral_brake_accel_mps2,
 )
+from pd_core.latency import CompensatesLatency, LatencyCompensator
 
 _G_MPS2 = float(-GRAVITY_MPS2[2])
 
@@ -82,6 +84,9 @@ class ShieldParams:
     """below this observed altitude a descending lander may not free-fall (0: no guard)"""
     handover_altitude_m: float = HANDOVER_ALTITUDE_M
     """above this observed altitude the teacher flies where its lateral limit binds (0: never)"""
+    max_delay_steps: float = float(MAX_DELAY_STEPS)
+    """longest actuation delay (0.2 s steps) identified in flight and predicted through
+    (`pd_core.latency`; 0: decide on the observed state)"""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.thrust_margin <= 1.0:
@@ -96,6 +101,9 @@ class ShieldParams:
             raise ValueError(
                 f"shield handover_altitude_m must be in [0, 3000], got {self.handover_altitude_m}"
             )
+        d = self.max_delay_steps
+        if not (0.0 <= d <= 10.0 and d == int(d)):
+            raise ValueError(f"shield max_delay_steps must be an integer in [0, 10], got {d}")
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -176,10 +184,18 @@ def shield_actions(
     return space.levels_to_action(levels).astype(np.int64).reshape(shape), fire | guard | hand
 
 
-class ShieldedActor:
+def latency_for(p: ShieldParams | None) -> LatencyCompensator | None:
+    """The latency compensation a shield asks for (None: none)."""
+    if p is None or p.max_delay_steps <= 0:
+        return None
+    return LatencyCompensator(int(p.max_delay_steps))
+
+
+class ShieldedActor(CompensatesLatency):
     """Any actor (`act_batch` on physical states -> action indices of `space`) behind the shield,
     so that a reference controller can be flown behind the same runtime assurance as a policy
-    (a like-for-like comparison: `pd-eval ... --compare shield:controller:zemzev`)."""
+    (a like-for-like comparison: `pd-eval ... --compare shield:controller:zemzev`), latency
+    compensation included."""
 
     def __init__(
         self, actor: Any, p: ShieldParams | None = None, space: ActionSpace | None = None
@@ -190,6 +206,7 @@ class ShieldedActor:
         self.name = f"{getattr(actor, 'name', 'actor')}+shield"
         self.shield_fired = 0
         """steps on which the shield overrode the actor or handed it over (since construction)"""
+        self.latency = latency_for(self.shield)
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         out, fired = shield_actions(self.actor.act_batch(states), states, self.actions, self.shield)

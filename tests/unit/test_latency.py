@@ -1,0 +1,128 @@
+"""Latency compensation: the predicted state is where the delayed plant takes the lander, the lag
+is identified under noise and thrust error, a flight without delay is unchanged to the bit, a
+policy lands through delays it otherwise loses, a simulator reset clears the memory, and policy
+files carry the setting."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.controllers import make_controller
+from pd_core.dispersions import Dispersions, load_scenarios
+from pd_core.env import make_vector_env
+from pd_core.evaluate import rollout
+from pd_core.latency import LatencyCompensator, lag_residuals
+from pd_core.policy import PolicyLoadError, load_policy
+from pd_core.shield import ShieldedActor, ShieldParams, latency_for
+
+ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
+
+
+def test_the_prediction_is_where_the_delayed_plant_takes_the_lander():
+    """No disturbance: once the lag is known, the state predicted now is the true state two
+    steps later, to rounding (the commands in the pipeline are the ones it propagates)."""
+    env = make_vector_env(
+        1, disturbance=False, autoreset=False, dispersions=Dispersions("d2", delay_steps=2)
+    )
+    _, info = env.reset(seed=4)
+    comp = LatencyCompensator(4)
+    rng = np.random.default_rng(0)
+    predicted, true = [], [info["state"][0].copy()]
+    for _ in range(40):
+        predicted.append(comp.predict(info["observed_state"], np.array([0]))[0])
+        a = rng.integers(0, DEFAULT_ACTIONS.n, 1)
+        comp.record(np.array([0]), DEFAULT_ACTIONS.table_n[a])
+        _, _, _, _, info = env.step(a)
+        true.append(info["state"][0].copy())
+    assert comp.delay_steps[0] == 2
+    for t in range(5, 38):
+        np.testing.assert_allclose(predicted[t], true[t + 2], rtol=0, atol=1e-9)
+
+
+def test_lag_residuals_are_zero_for_the_lag_that_happened():
+    issued = np.array([[[0.0, 0.0, 13e3], [3e3, 0.0, 6.5e3], [0.0, 0.0, 0.0]]])
+    m = np.array([2000.0])
+    dv = (issued[0, 1] / m[0] + np.array([0.0, 0.0, -3.72])) * 0.2
+    res = lag_residuals(dv[None], m, issued)
+    assert res[0, 1] == pytest.approx(0.0, abs=1e-12)
+    assert res[0, 0] == pytest.approx(0.3**2 + 0.65**2, rel=1e-9)  # 3 kN and 6.5 kN at 2 t
+
+
+@pytest.mark.parametrize("delay", [1, 3])
+def test_the_lag_is_identified_under_navigation_noise_and_thrust_error(delay):
+    """Metre-class position noise, 0.1 m/s velocity noise and a 5 % thrust error on every
+    thruster: every one of 40 landers ends its flight predicting with the lag it had."""
+    d = Dispersions(
+        "noisy",
+        delay_steps=delay,
+        thrust_error=0.05,
+        nav_position_sigma_m=1.0,
+        nav_velocity_sigma_mps=0.1,
+        nav_mass_sigma_kg=10.0,
+    )
+    actor = ShieldedActor(make_controller("zemzev"))
+    ro = rollout(actor, 40, 9_100_000, dispersions=d)
+    assert ro.landed.all()
+    np.testing.assert_array_equal(actor.latency.delay_steps[:40], delay)
+
+
+@pytest.mark.parametrize("scenario", ["nominal", "nav-noise", "gusts"])
+def test_without_delay_the_compensated_flight_is_unchanged(scenario):
+    """The lag stays 0 where there is none: the same final states to the bit as deciding on the
+    observed state (so the nominal figures and the lockstep node tests do not move)."""
+    policy = load_policy(ROBUST)
+    sc = load_scenarios(scenario)[0]
+    on = rollout(policy, 60, 9_200_000, dispersions=sc)
+    policy.latency = None
+    off = rollout(policy, 60, 9_200_000, dispersions=sc)
+    np.testing.assert_array_equal(on.final_states, off.final_states)
+
+
+def test_the_shipped_policy_lands_through_delays_it_loses_without_compensation():
+    """Two and four steps (0.4 and 0.8 s) of actuation delay; seed unseen by any run reported."""
+    policy = load_policy(ROBUST)
+    rates = {}
+    for delay in (2, 4):
+        d = Dispersions(f"delay-{delay}", delay_steps=delay)
+        for on in (True, False):
+            policy.latency = latency_for(policy.shield) if on else None
+            rates[delay, on] = rollout(policy, 150, 9_300_000, dispersions=d).landed.mean()
+    assert rates[2, True] >= 0.99 and rates[4, True] >= 0.99
+    assert rates[2, False] <= 0.9 and rates[4, False] <= 0.3
+
+
+def test_a_simulator_reset_clears_the_memory():
+    comp = LatencyCompensator(4)
+    s = np.array([[0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0]])
+    comp.predict(s, np.array([0]))
+    comp.record(np.array([0]), np.array([[0.0, 0.0, 13e3]]))
+    comp.delay_steps[0] = 3
+    s2 = s.copy()
+    s2[0, 2] = 2500.0  # a new episode: 1.5 km above where the lander was heading
+    np.testing.assert_array_equal(comp.predict(s2, np.array([0])), s2)
+    assert comp.delay_steps[0] == 0 and not comp._issued.any()
+
+
+def test_policy_files_carry_the_setting_and_refuse_a_bad_one(tmp_path):
+    """Files written before the setting get the default (4 steps); 0 turns it off; a fraction
+    or a negative number of steps is refused in one line."""
+    meta = json.loads(Path(ROBUST).with_suffix(".json").read_text())
+    assert "max_delay_steps" not in meta["shield"]
+    assert load_policy(ROBUST).latency.max_delay_steps == 4
+    assert latency_for(ShieldParams(max_delay_steps=0)) is None
+    assert latency_for(None) is None
+    for bad in (2.5, -1, 11):
+        with pytest.raises(ValueError, match="max_delay_steps must be an integer in"):
+            ShieldParams(max_delay_steps=bad)
+    pt = tmp_path / "p.pt"
+    pt.write_bytes(Path(ROBUST).read_bytes())
+    meta["shield"] = dict(meta["shield"], max_delay_steps=1.5)
+    pt.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(PolicyLoadError, match="max_delay_steps") as err:
+        load_policy(pt)
+    assert "\n" not in str(err.value)
