@@ -62,7 +62,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "file",
         "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
         "than it can still brake, no free fall below 10 m, the teacher above 5 m where its "
-        "lateral limit binds): 'file' as the policy file's "
+        "lateral limit binds; decisions on the state the command will meet, under an actuation "
+        "delay of up to 4 steps identified in flight): 'file' as the policy file's "
         "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
@@ -140,6 +141,7 @@ class PolicyNode(Node):
         self._last: tuple[int, int] = (0, -1)  # (episode, step) of the last state received
         self._answered: tuple[int, int] | None = None  # ... and of the last one answered
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
+        self._episode: int | None = None  # episode whose commands the compensation remembers
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
         self._cmd_pub = self.create_publisher(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS)
@@ -193,7 +195,7 @@ class PolicyNode(Node):
             return
         try:
             state = check_state(state_from_msg(msg))
-            action = self.policy.act(state)
+            action = self._decide(msg.episode, state)
         except ValueError as exc:
             self.invalid += 1
             if self.invalid <= LOG_FIRST or self.invalid % 100 == 0:
@@ -209,6 +211,16 @@ class PolicyNode(Node):
         self._since_log.append(dt)
         self.answered += 1
 
+    def _decide(self, episode: int, state: Any) -> int:
+        """The action for a valid state; a policy (or a shielded controller) with latency
+        compensation remembers the commands of the episode (pd_core.latency)."""
+        if not hasattr(self.policy, "act_online"):
+            return self.policy.act(state)
+        if episode != self._episode:
+            self._episode = episode
+            self.policy.begin_episodes(1)
+        return self.policy.act_online(state)
+
     def decision_stats(self, samples: Any = None) -> str:
         a = np.asarray(self._times if samples is None else samples, dtype=float) * 1e3
         if a.size == 0:
@@ -220,10 +232,12 @@ class PolicyNode(Node):
 
     def _counts(self) -> str:
         shielded = getattr(self.policy, "shield_fired", 0)
+        latency = getattr(self.policy, "latency", None)
+        delay = "" if latency is None else f", actuation delay {latency.delay_steps[0]} step(s)"
         return (
-            f"{self.answered} answered ({shielded} overridden by the shield), {self.repeats} "
-            f"repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), {self.lost} "
-            "lost (DDS) states in all"
+            f"{self.answered} answered ({shielded} overridden by the shield{delay}), "
+            f"{self.repeats} repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), "
+            f"{self.lost} lost (DDS) states in all"
         )
 
     def _log_stats(self) -> None:
