@@ -25,6 +25,7 @@ import math
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,6 +38,7 @@ from pd_core.env import PoweredDescentEnv, Status
 from pd_core.ocp import check_request
 
 MISSING_COMMAND_MODES = ("hold", "zero")
+MAX_SIM_DELAY_STEPS = 50  # as pd_core.dispersions.Dispersions.delay_steps
 
 # A command's thrust must equal the table thrust of its action to this tolerance (N). The policy
 # sends the table value itself, so anything beyond rounding is a sender bug or a tampered message.
@@ -58,8 +60,8 @@ class Command:
 class StepOutcome:
     """What one `Simulator.advance` did."""
 
-    action: int | None  # the action flown; None for zero thrust with no action
-    thrust_n: tuple[float, float, float]
+    action: int | None  # the action commanded; None for zero thrust with no action
+    thrust_n: tuple[float, float, float]  # the thrust the plant flew (delay_steps late)
     fresh: bool  # a command answering this step was applied (not held / zero)
     status: Status
     done: bool  # the episode ended with this step
@@ -190,7 +192,12 @@ class Simulator:
         dt_s: float = DT_S,
         seed: int | None = None,
         command_source: str = "",
+        delay_steps: int = 0,
     ) -> None:
+        if not (isinstance(delay_steps, int) and 0 <= delay_steps <= MAX_SIM_DELAY_STEPS):
+            raise ValueError(
+                f"delay_steps must be an integer in [0, {MAX_SIM_DELAY_STEPS}], got {delay_steps!r}"
+            )
         if missing_command not in MISSING_COMMAND_MODES:
             raise ValueError(
                 f"missing_command must be one of {MISSING_COMMAND_MODES}, got {missing_command!r}"
@@ -208,6 +215,10 @@ class Simulator:
         self.missing_command = missing_command
         self.command_source = command_source
         """only commands whose `source` is this node name fly ("": any publisher)"""
+        self.delay_steps = delay_steps
+        """actuation delay: the plant flies the command of this many steps earlier (a FIFO
+        filled with zero thrust at reset, as `pd_core.dispersions`' `delay_steps`)"""
+        self._fifo: deque[tuple[float, float, float]] = deque()
         self.counters = Counters()
         self.episode = 0  # number of the current (or last) episode; 0 before the first
         self.flying = False
@@ -267,6 +278,7 @@ class Simulator:
         self._initial = np.asarray(info["state"], dtype=float).copy()
         self._pending = None
         self._last_action = None
+        self._fifo = deque([(0.0, 0.0, 0.0)] * self.delay_steps)
         self._ep_rejected = 0
         self._ep_missed = 0
         self.counters.episodes_started += 1
@@ -315,11 +327,16 @@ class Simulator:
         self._pending = None
         if action is None:
             thrust = (0.0, 0.0, 0.0)
-            _, _, terminated, truncated, info = self.env.step_thrust(thrust)
         else:
             thrust = tuple(float(v) for v in self.actions.table_n[action])
-            _, _, terminated, truncated, info = self.env.step(action)
             self._last_action = action
+        if self.delay_steps:
+            self._fifo.append(thrust)
+            thrust = self._fifo.popleft()
+        if action is None or self.delay_steps:
+            _, _, terminated, truncated, info = self.env.step_thrust(thrust)
+        else:
+            _, _, terminated, truncated, info = self.env.step(action)
         self.counters.steps += 1
         self._status = Status(info["status"])
         result = None

@@ -32,7 +32,13 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S
-from pd_core.sim import MISSING_COMMAND_MODES, FixedRateTicker, Simulator, percentiles_ms
+from pd_core.sim import (
+    MAX_SIM_DELAY_STEPS,
+    MISSING_COMMAND_MODES,
+    FixedRateTicker,
+    Simulator,
+    percentiles_ms,
+)
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import names, params, qos
@@ -106,6 +112,12 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "Rejected commands logged one by one per episode; after that every 100th (all are "
         "counted in EpisodeResult.rejected_commands).",
     ),
+    "delay_steps": (
+        0,
+        "Actuation delay for latency tests: the lander flies the command of this many steps "
+        "(0.2 s each) earlier, zero thrust before the first (as pd-eval's delay_steps "
+        "dispersion). 0 = none.",
+    ),
     "command_source": (
         "",
         "Name of the one node whose thrust commands fly (e.g. pd_policy_node): commands from "
@@ -123,6 +135,9 @@ CHECKS: dict[str, params.Check] = {
     "seed": params.at_least(-1),
     "max_time_s": params.at_least(DT_S),
     "tick_priority": params.at_least(0),
+    "delay_steps": lambda v: (
+        None if 0 <= v <= MAX_SIM_DELAY_STEPS else f"must be in [0, {MAX_SIM_DELAY_STEPS}]"
+    ),
     "log_rejections": params.at_least(0),
     "command_source": lambda v: (
         None
@@ -154,6 +169,7 @@ class SimNode(Node):
             max_time_s=p["max_time_s"],
             seed=p["seed"] if p["seed"] >= 0 else None,
             command_source=p["command_source"],
+            delay_steps=p["delay_steps"],
         )
         self._restart_due = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command

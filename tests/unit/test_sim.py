@@ -223,6 +223,28 @@ def test_missing_command_hold_or_zero(mode, expected):
     assert sim.counters.missed_commands == 2
 
 
+def test_an_actuation_delay_flies_each_command_that_many_steps_late():
+    """delay_steps 2: zero thrust for the first two steps of an episode (engines not lit), then
+    the command of two steps earlier; a reset refills the FIFO with zero thrust."""
+    levels = [np.array(v) for v in ([3, 3, 2], [6, 3, 1], [0, 6, 2], [3, 0, 0])]
+    acts = [int(DEFAULT_ACTIONS.levels_to_action(v)) for v in levels]
+    sim = Simulator(disturbance=False, delay_steps=2)
+    for _ in range(2):
+        ep, _, _ = sim.reset(initial_state=[0.0, 0.0, 1500.0, 0.0, 0.0, -50.0, 2000.0])
+        flown = []
+        for k, a in enumerate(acts):
+            sim.submit(cmd(ep, k, a))
+            out = sim.advance()
+            assert out.action == a and out.fresh
+            flown.append(out.thrust_n)
+        zero = (0.0, 0.0, 0.0)
+        want = [zero, zero] + [tuple(DEFAULT_ACTIONS.table_n[a]) for a in acts[:2]]
+        assert flown == want
+    for bad in (-1, 51, 1.5):
+        with pytest.raises(ValueError, match="delay_steps must be an integer in"):
+            Simulator(delay_steps=bad)
+
+
 def test_free_fall_crashes_with_reason_and_stops():
     sim = Simulator(disturbance=False)
     sim.reset(initial_state=[0.0, 0.0, 50.0, 0.0, 0.0, -20.0, 2000.0])
