@@ -251,7 +251,10 @@ def format_table(t: dict[str, Any]) -> str:
     """Scenario x agent text table (with the reachability columns when the table has them)."""
     width = 14
     reach = t.get("reachability")
-    head = f"{'scenario':<14}{'agent':<18}" + "".join(f"{m[1]:>{width}}" for m in METRICS)
+    # long names (a YAML campaign's, a --compare label) widen their column instead of running on
+    sw = max([14] + [len(d["name"]) + 2 for d in t["scenarios"]])
+    aw = max([18] + [len(a) + 2 for a in t["agents"]])
+    head = f"{'scenario':<{sw}}{'agent':<{aw}}" + "".join(f"{m[1]:>{width}}" for m in METRICS)
     if reach is not None:
         head += f"{REACH_HEAD[0]:>{width}}{REACH_HEAD[1]:>24}"
     lines = [
@@ -269,7 +272,7 @@ def format_table(t: dict[str, Any]) -> str:
                 rate = cell["success_rate_reachable"]
                 vals += f"{reach[d['name']]['out_of_reach']:>{width}d}"
                 vals += f"{'-' if rate is None else f'{100 * rate:.1f}':>24}"
-            lines.append(f"{d['name']:<14}{a:<18}{vals}")
+            lines.append(f"{d['name']:<{sw}}{a:<{aw}}{vals}")
     lines.append("")
     for a, v in t["mean_success_rate"].items():
         lines.append(f"mean success over the campaign, {a}: {100 * v:.2f} %")

@@ -38,3 +38,15 @@ def test_campaign_from_yaml_and_refusals(tmp_path, capsys):
     assert t["scenarios"][0]["mass_kg"] == [2150.0, 2250.0]
     assert pd_eval.main(["--controller", "zemzev", "--dispersions", "windy"]) == 2
     assert "unknown dispersion scenario" in capsys.readouterr().err
+
+
+def test_long_scenario_and_agent_names_keep_their_columns(tmp_path, capsys):
+    f = tmp_path / "long.yaml"
+    f.write_text("scenarios:\n  - {name: delay2-thrust-misalignment, delay_steps: 2}\n")
+    argv = ["--controller", "zemzev", "--name", "zz", "--episodes", "4", "--dispersions", str(f)]
+    argv += ["--compare", "zemzev-behind-the-shield=shield:controller:zemzev"]
+    assert pd_eval.main(argv + ["--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("delay2-")]
+    assert len(rows) == 2
+    for r in rows:  # name, agent and six figures, each separated by spaces
+        assert len(r.split()) == 8, r
