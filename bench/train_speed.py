@@ -139,9 +139,10 @@ def loop_costs_us(seconds: float) -> dict[str, float]:
     return out
 
 
-def act_time_us(seconds: float) -> tuple[float, float, float, float]:
+def act_time_us(seconds: float) -> tuple[float, float, float, float, float]:
     """Policy.act through numpy, the same behind the shield (a Table 3 state; a wide-box corner
-    state the shield hands to the teacher), torch forward+argmax."""
+    state the shield hands to the teacher), Policy.act_online predicting through two steps of
+    identified delay (pd_core.latency), torch forward+argmax."""
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as d:
         path = save_policy(Path(d) / "m", QNetwork())
@@ -152,6 +153,9 @@ def act_time_us(seconds: float) -> tuple[float, float, float, float]:
     k, dt_sh = _timed(lambda: shielded.act(s), seconds)
     corner = np.array([0.0, -1800.0, 300.0, 0.0, -40.0, -40.0, 1800.0])
     j, dt_ho = _timed(lambda: shielded.act(corner), seconds)
+    shielded.latency.delay_steps[0] = 2
+    shielded.latency.margin = np.inf  # keep the lag at 2 whatever the residuals say
+    i, dt_lat = _timed(lambda: shielded.act_online(s), seconds)
     net = pol.network
     x = torch.from_numpy((s * 1.0).astype(np.float32))[None]
 
@@ -160,7 +164,7 @@ def act_time_us(seconds: float) -> tuple[float, float, float, float]:
             net(x).argmax()
 
     m, dt2 = _timed(torch_act, seconds)
-    return 1e6 * dt / n, 1e6 * dt_sh / k, 1e6 * dt_ho / j, 1e6 * dt2 / m
+    return 1e6 * dt / n, 1e6 * dt_sh / k, 1e6 * dt_ho / j, 1e6 * dt_lat / i, 1e6 * dt2 / m
 
 
 def env_steps_per_s(num_envs: int, seconds: float) -> float:
@@ -221,11 +225,12 @@ def main() -> None:
         cfg = replace(preset(name), **kw)
         ups = ours_updates_per_s(name, a.seconds, **kw)
         print(f"   updates/s, {name:12s} batch {cfg.batch_agent}+{cfg.batch_demo}: {ups:8.1f}")
-    us, ussh, usho, ust = act_time_us(a.seconds)
+    us, ussh, usho, uslat, ust = act_time_us(a.seconds)
     print(
         f"   Policy.act(one state): numpy {us:.1f} us; behind the shield {ussh:.1f} us "
         f"({ussh / us:.2f}x), {usho:.1f} us ({usho / us:.2f}x) where it hands over to the "
-        f"teacher; torch forward+argmax {ust:.1f} us"
+        f"teacher; act_online through 2 steps of identified delay {uslat:.1f} us "
+        f"({uslat / us:.2f}x); torch forward+argmax {ust:.1f} us"
     )
 
 
