@@ -17,6 +17,15 @@ a step and a lateral one by 0.33 m/s, several times the velocity noise of a Dopp
 velocimeter, so the right lag stands out after a few changes of command; a thrust error,
 misalignment or gust shifts every candidate alike and does not bias the choice.
 
+The plant is identified too. Each lag keeps a thrust matrix (delivered force = matrix @
+command), estimated by a Kalman filter from the same measurements (the force m dv / dt - m g
+against the command that lag says was flown), with a measurement noise taken from the lag's own
+residuals, so metre-class navigation noise weighs each step less. The prediction through the
+pipeline uses the chosen lag's matrix. With a 10 % thrust error and 4 deg of misalignment on top
+of two steps of delay, predicting on the nominal plant left the shipped policy at 98.0 % (seed
+60000000; 98.4 % at 70000000) and the identified plant 100.0 % (99.8 %); with 3 m / 0.3 m/s of
+navigation noise, 99.0 % against 99.2 % (98.4 % against 98.6 %); 500 episodes each.
+
 One lander per row: `LatencyCompensator` keeps the commands issued and the scores of each row;
 `CompensatesLatency` puts it in front of a policy or a shielded controller, as the shield
 settings ask (`ShieldParams.max_delay_steps`): `pd_core.evaluate.fly_episodes` tells it which
@@ -43,9 +52,19 @@ it, 0.1 m/s of velocity noise made 0.4 % of the steps of flights without delay p
 spurious lag early in the flight (0 % with it; 300 episodes, seed 9400000)"""
 TIE_BREAK_MPS2 = 1e-3
 """(m/s)^2 added per step of lag to the initial score: equal evidence chooses the shorter lag"""
+THRUST_MATRIX_PRIOR_SD = 0.1
+"""prior spread of each entry of the thrust matrix (delivered = matrix @ command): 10 % covers
+the thrust errors (5-10 %) and misalignments (2-4 deg, 0.03-0.07) a flight team flies"""
+FORCE_NOISE_N = 1000.0
+"""prior spread of one step's measured force per axis, m dv / dt (0.1 m/s of velocity noise on a
+2 t lander gives 1400 N; 100 N of disturbance without it); then the lander's own residuals
+decide it (`LatencyCompensator.force_noise_var`)"""
 JUMP_M = 50.0
 """a row whose observed position is this far from where its last observation was heading
 starts a new episode (a reset of the simulator): its memory is cleared"""
+
+
+_COV0 = np.eye(3) * THRUST_MATRIX_PRIOR_SD**2
 
 
 def propagate(states: np.ndarray, queued_thrust_n: np.ndarray, dt_s: float = DT_S) -> np.ndarray:
@@ -59,13 +78,36 @@ def propagate(states: np.ndarray, queued_thrust_n: np.ndarray, dt_s: float = DT_
 
 
 def lag_residuals(
-    dv_mps: np.ndarray, mass_kg: np.ndarray, issued_n: np.ndarray, dt_s: float = DT_S
+    dv_mps: np.ndarray,
+    mass_kg: np.ndarray,
+    issued_n: np.ndarray,
+    gain: np.ndarray | None = None,
+    dt_s: float = DT_S,
 ) -> np.ndarray:
     """(B, L) squared norm of the observed velocity change (B, 3) over the last step minus the one
     each lag would give: lag d applies `issued_n[:, d]` (B, L, 3), the command issued d + 1
-    steps before now, on landers of mass (B,) kg."""
-    expected = (issued_n / mass_kg[:, None, None] + GRAVITY_MPS2) * dt_s
+    steps before now, through the thrust matrix `gain[:, d]` (B, L, 3, 3; None: identity), on
+    landers of mass (B,) kg."""
+    delivered = issued_n if gain is None else np.einsum("blij,blj->bli", gain, issued_n)
+    expected = (delivered / mass_kg[:, None, None] + GRAVITY_MPS2) * dt_s
     return ((dv_mps[:, None, :] - expected) ** 2).sum(axis=-1)
+
+
+def update_thrust_matrix(
+    gain: np.ndarray,
+    cov: np.ndarray,
+    command_n: np.ndarray,
+    force_n: np.ndarray,
+    noise_var_n2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One Kalman step of delivered force = gain @ command (per row and lag; each output axis an
+    independent measurement with the same regressor): gain (..., 3, 3), the covariance of each
+    of its rows cov (..., 3, 3), the command (..., 3), the force measured over the step (..., 3)
+    and its noise variance (...), N^2. A zero command carries no information."""
+    pu = np.einsum("...ij,...j->...i", cov, command_n)
+    k = pu / (noise_var_n2 + np.einsum("...i,...i->...", command_n, pu))[..., None]
+    err = force_n - np.einsum("...ij,...j->...i", gain, command_n)
+    return gain + err[..., :, None] * k[..., None, :], cov - k[..., :, None] * pu[..., None, :]
 
 
 class LatencyCompensator:
@@ -77,12 +119,15 @@ class LatencyCompensator:
         n_rows: int = 1,
         forget: float = FORGET_PER_STEP,
         margin: float = SWITCH_MARGIN_MPS2,
+        thrust_model: bool = True,
     ):
         if not 0 <= max_delay_steps <= 10:
             raise ValueError(f"max_delay_steps must be in [0, 10], got {max_delay_steps}")
         self.max_delay_steps = int(max_delay_steps)
         self.forget = forget
         self.margin = margin
+        self.thrust_model = thrust_model
+        """identify the thrust matrix of each lag too (else the nominal plant: identity)"""
         self.reset(n_rows)
 
     def reset(self, n_rows: int) -> None:
@@ -93,20 +138,29 @@ class LatencyCompensator:
         self._score = np.tile(TIE_BREAK_MPS2 * np.arange(lags, dtype=float), (n_rows, 1))
         self.delay_steps = np.zeros(n_rows, dtype=np.int64)
         """the lag each row is predicted with (its current estimate)"""
+        self.gain = np.tile(np.eye(3), (n_rows, lags, 1, 1))
+        """thrust matrix of each row and lag (delivered force = gain @ command)"""
+        self._cov = np.tile(_COV0, (n_rows, lags, 1, 1))
+        self.force_noise_var = np.full((n_rows, lags), FORCE_NOISE_N**2)
+        """running mean square of each lag's force residual per axis (N^2)"""
 
     def _grow(self, n_rows: int) -> None:
         if n_rows <= len(self._last):
             return
-        old = (self._issued, self._last, self._score, self.delay_steps)
+        names = ("_issued", "_last", "_score", "delay_steps", "gain", "_cov", "force_noise_var")
+        old = [getattr(self, n) for n in names]
         self.reset(n_rows)
-        k = len(old[1])
-        self._issued[:k], self._last[:k], self._score[:k], self.delay_steps[:k] = old
+        for n, o in zip(names, old, strict=True):
+            getattr(self, n)[: len(o)] = o
 
     def _clear(self, rows: np.ndarray) -> None:
         self._issued[rows] = 0.0
         self._last[rows] = np.nan
         self._score[rows] = TIE_BREAK_MPS2 * np.arange(self.max_delay_steps + 1)
         self.delay_steps[rows] = 0
+        self.gain[rows] = np.eye(3)
+        self._cov[rows] = _COV0
+        self.force_noise_var[rows] = FORCE_NOISE_N**2
 
     def predict(self, observed: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """States (B, 7) the next commands of rows (B,) will meet, given their observed states
@@ -125,23 +179,42 @@ class LatencyCompensator:
             self._clear(rows[jumped])
             seen &= ~jumped
         if seen.any():
-            r = rows[seen]
-            res = lag_residuals(obs[seen, 3:6] - last[seen, 3:6], last[seen, 6], self._issued[r])
-            self._score[r] = self.forget * self._score[r] + res
-            best = np.argmin(self._score[r], axis=1)
-            now = self.delay_steps[r]
-            score = self._score[r]
-            k = np.arange(len(r))
-            switch = score[k, best] < score[k, now] - self.margin
-            self.delay_steps[r] = np.where(switch, best, now)
+            self._observe(rows[seen], obs[seen, 3:6] - last[seen, 3:6], last[seen, 6])
         self._last[rows] = obs
         out = obs.copy()
         for d in range(1, self.max_delay_steps + 1):
             sel = self.delay_steps[rows] == d
             if sel.any():
                 queued = self._issued[rows[sel], :d][:, ::-1]  # oldest first
+                if self.thrust_model:
+                    g = self.gain[rows[sel], d][:, None]
+                    queued = np.einsum("bkij,bkj->bki", g, queued)
                 out[sel] = propagate(obs[sel], queued)
         return out
+
+    def _observe(self, r: np.ndarray, dv_mps: np.ndarray, mass_kg: np.ndarray) -> None:
+        """Rows r saw the velocity change dv (B, 3) over the last step, at mass (B,): score the
+        lags, identify their thrust matrices, move the lag estimate where the evidence says."""
+        gain = self.gain[r] if self.thrust_model else None
+        res = lag_residuals(dv_mps, mass_kg, self._issued[r], gain)
+        if self.thrust_model:
+            m = mass_kg[:, None]
+            force = m * (dv_mps / DT_S - GRAVITY_MPS2)
+            var = (
+                self.forget * self.force_noise_var[r]
+                + (1.0 - self.forget) * res * (m / DT_S) ** 2 / 3.0
+            )
+            self.force_noise_var[r] = var
+            self.gain[r], self._cov[r] = update_thrust_matrix(
+                self.gain[r], self._cov[r], self._issued[r], force[:, None, :], var
+            )
+        score = self.forget * self._score[r] + res
+        self._score[r] = score
+        best = np.argmin(score, axis=1)
+        now = self.delay_steps[r]
+        k = np.arange(len(r))
+        switch = score[k, best] < score[k, now] - self.margin
+        self.delay_steps[r] = np.where(switch, best, now)
 
     def record(self, rows: np.ndarray, thrust_n: np.ndarray) -> None:
         """The commands (B, 3), N, just issued for rows (B,)."""
