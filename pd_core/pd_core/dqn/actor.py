@@ -11,17 +11,21 @@ import torch
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.dqn.network import QNetwork
-from pd_core.shield import ShieldParams, shield_actions
+from pd_core.latency import CompensatesLatency
+from pd_core.shield import ShieldParams, latency_for, shield_actions
 from pd_core.state import scale_state
 
 
-class NetActor:
+class NetActor(CompensatesLatency):
     """Greedy actions of a Q-network on physical states (`pd_core.evaluate.Actor`), behind the
-    braking shield if given one."""
+    braking shield if given one, with its latency compensation (training evaluates the policy
+    as it will fly)."""
 
     def __init__(self, net: QNetwork, shield: ShieldParams | None = None) -> None:
         self.net = net
         self.shield = shield
+        self.actions = DEFAULT_ACTIONS
+        self.latency = latency_for(shield)
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         with torch.no_grad():
