@@ -8,10 +8,16 @@ an expected kind (a bad parameter, a bad model file) is one line on stderr and a
 never a traceback. Once the node has stopped and logged, a DDS teardown that hangs (a known
 failure class, e.g. eProsima/Fast-DDS#235; seen once here in CI on a loaded machine) cannot keep
 the process alive: after `TEARDOWN_S` it says so in one line and exits with the same status.
+The watchdog is armed before `on_shutdown`, whose last log line also goes out over DDS
+(/rosout). A hang that holds the GIL (a C call that never returns, seen once more in CI: the
+node logged its last line and was SIGKILLed 10 s later without a word) stops a Python timer
+too, so faulthandler backs it up from a C thread after twice as long: it dumps every thread's
+stack, to say where it hung, and exits with status 1.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -34,20 +40,31 @@ from pd_ros_common.params import ParameterError
 TEARDOWN_S = 5.0  # executor shutdown, destroy_node and rclpy shutdown take well under 1 s
 
 
-def _exit_if_teardown_hangs(name: str, status: int) -> threading.Timer:
-    def _exit() -> None:
-        print(
-            f"{name}: DDS teardown took over {TEARDOWN_S:g} s; exiting anyway",
-            file=sys.stderr,
-            flush=True,
-        )
-        sys.stdout.flush()
-        os._exit(status)
+class _Watchdog:
+    """Exits the process if the teardown outlives it; `cancel()` once the teardown is done."""
 
-    timer = threading.Timer(TEARDOWN_S, _exit)
-    timer.daemon = True
-    timer.start()
-    return timer
+    def __init__(self, name: str, status: int) -> None:
+        def _exit() -> None:
+            print(
+                f"{name}: DDS teardown took over {TEARDOWN_S:g} s; exiting anyway",
+                file=sys.stderr,
+                flush=True,
+            )
+            sys.stdout.flush()
+            os._exit(status)
+
+        self._timer = threading.Timer(TEARDOWN_S, _exit)
+        self._timer.daemon = True
+        self._timer.start()
+        faulthandler.dump_traceback_later(2.0 * TEARDOWN_S, exit=True)  # no GIL needed
+
+    def cancel(self) -> None:
+        self._timer.cancel()
+        faulthandler.cancel_dump_traceback_later()
+
+
+def _exit_if_teardown_hangs(name: str, status: int) -> _Watchdog:
+    return _Watchdog(name, status)
 
 
 def run_node(
@@ -89,11 +106,11 @@ def run_node(
         print(f"{name}: cannot start: {exc}", file=sys.stderr, flush=True)
         status = next(code for c, code in codes if isinstance(exc, c))
     finally:
+        watchdog = _exit_if_teardown_hangs(name, status)
         if node is not None:
             on_shutdown = getattr(node, "on_shutdown", None)
             if on_shutdown is not None:
                 on_shutdown()
-        watchdog = _exit_if_teardown_hangs(name, status)
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:

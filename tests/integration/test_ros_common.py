@@ -131,7 +131,7 @@ def test_domain_claims_differ_and_override(monkeypatch):
 
 
 def test_a_hanging_teardown_exits_with_the_status_and_one_line():
-    """The watchdog run_node starts after on_shutdown: a teardown stuck past TEARDOWN_S exits."""
+    """The watchdog run_node arms before on_shutdown: a teardown stuck past TEARDOWN_S exits."""
     code = (
         "import time\n"
         "from pd_ros_common import run\n"
@@ -147,3 +147,19 @@ def test_a_hanging_teardown_exits_with_the_status_and_one_line():
     code = code.replace("run._exit", "w = run._exit").replace("time.sleep(30)", "w.cancel()")
     out = subprocess.run([sys.executable, "-c", code + "time.sleep(0.5)\n"], timeout=20)
     assert out.returncode == 0
+
+
+def test_a_teardown_that_holds_the_gil_still_exits_and_says_where():
+    """A C call that never releases the GIL stops the Python timer; faulthandler's C thread
+    dumps the stacks and exits (status 1) after twice TEARDOWN_S."""
+    code = (
+        "import ctypes\n"
+        "from pd_ros_common import run\n"
+        "run.TEARDOWN_S = 0.2\n"
+        "run._exit_if_teardown_hangs('pd_x_node', 0)\n"
+        "ctypes.PyDLL(None).sleep(30)\n"  # PyDLL keeps the GIL through the call
+    )
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=20)
+    assert out.returncode == 1 and time.monotonic() - t0 < 15.0
+    assert "Timeout" in out.stderr and "<string>" in out.stderr, out.stderr
