@@ -11,8 +11,8 @@ the process alive: after `TEARDOWN_S` it says so in one line and exits with the 
 The watchdog is armed before `on_shutdown`, whose last log line also goes out over DDS
 (/rosout). A hang that holds the GIL (a C call that never returns, seen once more in CI: the
 node logged its last line and was SIGKILLed 10 s later without a word) stops a Python timer
-too, so faulthandler backs it up from a C thread after twice as long: it dumps every thread's
-stack, to say where it hung, and exits with status 1.
+too, so faulthandler backs it up from a C thread 50 % later (before a 10 s SIGKILL): it dumps
+every thread's stack, to say where it hung, and exits with status 1.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class _Watchdog:
         self._timer = threading.Timer(TEARDOWN_S, _exit)
         self._timer.daemon = True
         self._timer.start()
-        faulthandler.dump_traceback_later(2.0 * TEARDOWN_S, exit=True)  # no GIL needed
+        faulthandler.dump_traceback_later(1.5 * TEARDOWN_S, exit=True)  # no GIL needed
 
     def cancel(self) -> None:
         self._timer.cancel()

@@ -151,7 +151,7 @@ def test_a_hanging_teardown_exits_with_the_status_and_one_line():
 
 def test_a_teardown_that_holds_the_gil_still_exits_and_says_where():
     """A C call that never releases the GIL stops the Python timer; faulthandler's C thread
-    dumps the stacks and exits (status 1) after twice TEARDOWN_S."""
+    dumps the stacks and exits (status 1) after 1.5 TEARDOWN_S."""
     code = (
         "import ctypes\n"
         "from pd_ros_common import run\n"
