@@ -136,6 +136,9 @@ STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
 GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.shield)
+# ours: where the guard's raised level would climb faster than this, it lets a lander descending
+# slower than the land speed fall freely (pd_core.shield: the hover trap of light landers)
+GUARD_CLIMB_MPS2 = 1.0
 HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
 MAX_DELAY_STEPS = 4  # ours: longest actuation delay (0.8 s) identified in flight (pd_core.latency)
 
