@@ -132,35 +132,36 @@ class LatencyCompensator:
 
     def reset(self, n_rows: int) -> None:
         """Forget everything: n_rows landers whose engines are not lit yet."""
+        for name, value in self._fresh(n_rows).items():
+            setattr(self, name, value)
+
+    def _fresh(self, n_rows: int) -> dict[str, np.ndarray]:
+        """The memory of n_rows landers that have flown nothing yet."""
         lags = self.max_delay_steps + 1
-        self._issued = np.zeros((n_rows, lags, 3))  # [:, k]: issued k + 1 steps ago
-        self._last = np.full((n_rows, 7), np.nan)  # last observed state (nan: none yet)
-        self._score = np.tile(TIE_BREAK_MPS2 * np.arange(lags, dtype=float), (n_rows, 1))
-        self.delay_steps = np.zeros(n_rows, dtype=np.int64)
-        """the lag each row is predicted with (its current estimate)"""
-        self.gain = np.tile(np.eye(3), (n_rows, lags, 1, 1))
-        """thrust matrix of each row and lag (delivered force = gain @ command)"""
-        self._cov = np.tile(_COV0, (n_rows, lags, 1, 1))
-        self.force_noise_var = np.full((n_rows, lags), FORCE_NOISE_N**2)
-        """running mean square of each lag's force residual per axis (N^2)"""
+        return {
+            "_issued": np.zeros((n_rows, lags, 3)),  # [:, k]: issued k + 1 steps ago
+            "_last": np.full((n_rows, 7), np.nan),  # last observed state (nan: none yet)
+            "_score": np.tile(TIE_BREAK_MPS2 * np.arange(lags, dtype=float), (n_rows, 1)),
+            # the lag each row is predicted with (its current estimate)
+            "delay_steps": np.zeros(n_rows, dtype=np.int64),
+            # thrust matrix of each row and lag (delivered force = gain @ command)
+            "gain": np.tile(np.eye(3), (n_rows, lags, 1, 1)),
+            "_cov": np.tile(_COV0, (n_rows, lags, 1, 1)),
+            # running mean square of each lag's force residual per axis (N^2)
+            "force_noise_var": np.full((n_rows, lags), FORCE_NOISE_N**2),
+        }
 
     def _grow(self, n_rows: int) -> None:
         if n_rows <= len(self._last):
             return
-        names = ("_issued", "_last", "_score", "delay_steps", "gain", "_cov", "force_noise_var")
-        old = [getattr(self, n) for n in names]
-        self.reset(n_rows)
-        for n, o in zip(names, old, strict=True):
-            getattr(self, n)[: len(o)] = o
+        for name, value in self._fresh(n_rows).items():
+            old = getattr(self, name)
+            value[: len(old)] = old
+            setattr(self, name, value)
 
     def _clear(self, rows: np.ndarray) -> None:
-        self._issued[rows] = 0.0
-        self._last[rows] = np.nan
-        self._score[rows] = TIE_BREAK_MPS2 * np.arange(self.max_delay_steps + 1)
-        self.delay_steps[rows] = 0
-        self.gain[rows] = np.eye(3)
-        self._cov[rows] = _COV0
-        self.force_noise_var[rows] = FORCE_NOISE_N**2
+        for name, value in self._fresh(len(rows)).items():
+            getattr(self, name)[rows] = value
 
     def predict(self, observed: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """States (B, 7) the next commands of rows (B,) will meet, given their observed states
@@ -231,6 +232,7 @@ class CompensatesLatency:
     stateless (labels, demonstrations, training)."""
 
     latency: LatencyCompensator | None = None
+    _online_episode: int | None = None
     actions: ActionSpace
     act_batch: Any  # the actor's own: physical states (B, 7) -> actions (B,)
 
@@ -248,7 +250,11 @@ class CompensatesLatency:
         self.latency.record(rows, self.actions.table_n[actions])
         return actions
 
-    def act_online(self, state: np.ndarray) -> int:
-        """Action for the next observed state (7,) of the one lander flown (row 0)."""
+    def act_online(self, state: np.ndarray, episode: int | None = None) -> int:
+        """Action for the next observed state (7,) of the one lander flown (row 0); a new
+        `episode` number (the simulator's) restarts the memory."""
+        if episode is not None and episode != self._online_episode:
+            self._online_episode = episode
+            self.begin_episodes(1)
         s = np.asarray(state, dtype=float).reshape(1, 7)
         return int(self.act_rows(s, np.zeros(1, dtype=np.int64))[0])

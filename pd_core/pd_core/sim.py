@@ -333,10 +333,7 @@ class Simulator:
         if self.delay_steps:
             self._fifo.append(thrust)
             thrust = self._fifo.popleft()
-        if action is None or self.delay_steps:
-            _, _, terminated, truncated, info = self.env.step_thrust(thrust)
-        else:
-            _, _, terminated, truncated, info = self.env.step(action)
+        _, _, terminated, truncated, info = self.env.step_thrust(thrust)
         self.counters.steps += 1
         self._status = Status(info["status"])
         result = None

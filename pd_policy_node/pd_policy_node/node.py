@@ -141,7 +141,6 @@ class PolicyNode(Node):
         self._last: tuple[int, int] = (0, -1)  # (episode, step) of the last state received
         self._answered: tuple[int, int] | None = None  # ... and of the last one answered
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
-        self._episode: int | None = None  # episode whose commands the compensation remembers
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
         self._cmd_pub = self.create_publisher(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS)
@@ -214,12 +213,9 @@ class PolicyNode(Node):
     def _decide(self, episode: int, state: Any) -> int:
         """The action for a valid state; a policy (or a shielded controller) with latency
         compensation remembers the commands of the episode (pd_core.latency)."""
-        if not hasattr(self.policy, "act_online"):
-            return self.policy.act(state)
-        if episode != self._episode:
-            self._episode = episode
-            self.policy.begin_episodes(1)
-        return self.policy.act_online(state)
+        if hasattr(self.policy, "act_online"):
+            return self.policy.act_online(state, episode)
+        return self.policy.act(state)
 
     def decision_stats(self, samples: Any = None) -> str:
         a = np.asarray(self._times if samples is None else samples, dtype=float) * 1e3

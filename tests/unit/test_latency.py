@@ -147,3 +147,18 @@ def test_policy_files_carry_the_setting_and_refuse_a_bad_one(tmp_path):
     with pytest.raises(PolicyLoadError, match="max_delay_steps") as err:
         load_policy(pt)
     assert "\n" not in str(err.value)
+
+
+def test_act_online_restarts_its_memory_with_a_new_episode():
+    """The policy node passes the simulator's episode number: a new one forgets the commands
+    and the lag of the last (no 50 m jump needed), the same one keeps them."""
+    policy = load_policy(ROBUST)
+    s = np.array([0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0])
+    policy.act_online(s, episode=1)
+    policy.latency.delay_steps[0] = 3
+    policy.latency._issued[0] = 5e3  # commands remembered from episode 1
+    policy.act_online(s, episode=1)
+    assert policy.latency.delay_steps[0] == 3 and policy.latency._issued[0, 1:].min() == 5e3
+    policy.act_online(s, episode=2)
+    assert policy.latency.delay_steps[0] == 0
+    assert not policy.latency._issued[0, 1:].any()  # only this episode's first command is left
