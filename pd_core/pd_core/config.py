@@ -135,6 +135,8 @@ STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
+# ours: the braking shield lets a lander touch down this fast (half of Eq. 12's 2 m/s)
+TOUCHDOWN_SPEED_MPS = 1.0
 GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.shield)
 # ours: where the guard's raised level would climb faster than this, it lets a lander descending
 # slower than the land speed fall freely (pd_core.shield: the hover trap of light landers)

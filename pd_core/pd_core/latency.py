@@ -41,6 +41,8 @@ import numpy as np
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.dynamics import step
+from pd_core.navfilter import NavFilter
+from pd_core.rowmemory import RowMemory
 
 FORGET_PER_STEP = 0.97
 """weight of a residual one step older (a memory of about 30 steps, 6 s: long against the
@@ -110,7 +112,7 @@ def update_thrust_matrix(
     return gain + err[..., :, None] * k[..., None, :], cov - k[..., :, None] * pu[..., None, :]
 
 
-class LatencyCompensator:
+class LatencyCompensator(RowMemory):
     """Per-row memory of the commands issued and the lag scores; see the module docstring."""
 
     def __init__(
@@ -120,6 +122,7 @@ class LatencyCompensator:
         forget: float = FORGET_PER_STEP,
         margin: float = SWITCH_MARGIN_MPS2,
         thrust_model: bool = True,
+        nav_filter: bool = False,
     ):
         if not 0 <= max_delay_steps <= 10:
             raise ValueError(f"max_delay_steps must be in [0, 10], got {max_delay_steps}")
@@ -128,12 +131,15 @@ class LatencyCompensator:
         self.margin = margin
         self.thrust_model = thrust_model
         """identify the thrust matrix of each lag too (else the nominal plant: identity)"""
+        self.nav = NavFilter(n_rows) if nav_filter else None
+        """the navigation filter the prediction starts from (None: the observed state)"""
         self.reset(n_rows)
 
     def reset(self, n_rows: int) -> None:
         """Forget everything: n_rows landers whose engines are not lit yet."""
-        for name, value in self._fresh(n_rows).items():
-            setattr(self, name, value)
+        super().reset(n_rows)
+        if self.nav is not None:
+            self.nav.reset(n_rows)
 
     def _fresh(self, n_rows: int) -> dict[str, np.ndarray]:
         """The memory of n_rows landers that have flown nothing yet."""
@@ -151,25 +157,23 @@ class LatencyCompensator:
             "force_noise_var": np.full((n_rows, lags), FORCE_NOISE_N**2),
         }
 
-    def _grow(self, n_rows: int) -> None:
-        if n_rows <= len(self._last):
-            return
-        for name, value in self._fresh(n_rows).items():
-            old = getattr(self, name)
-            value[: len(old)] = old
-            setattr(self, name, value)
+    def grow(self, n_rows: int) -> None:
+        super().grow(n_rows)
+        if self.nav is not None:
+            self.nav.grow(n_rows)
 
-    def _clear(self, rows: np.ndarray) -> None:
-        for name, value in self._fresh(len(rows)).items():
-            getattr(self, name)[rows] = value
+    def clear(self, rows: np.ndarray) -> None:
+        super().clear(rows)
+        if self.nav is not None:
+            self.nav.clear(rows)
 
     def predict(self, observed: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """States (B, 7) the next commands of rows (B,) will meet, given their observed states
         (B, 7); updates each row's lag estimate with the velocity change it just saw."""
         rows = np.asarray(rows, dtype=np.int64)
         obs = np.asarray(observed, dtype=float).reshape(-1, 7)
-        self._grow(int(rows.max()) + 1 if len(rows) else 0)
-        if self.max_delay_steps == 0:
+        self.grow(int(rows.max()) + 1 if len(rows) else 0)
+        if self.max_delay_steps == 0 and self.nav is None:
             self._last[rows] = obs
             return obs
         last = self._last[rows]
@@ -177,12 +181,17 @@ class LatencyCompensator:
         heading = last[:, 0:3] + last[:, 3:6] * DT_S
         jumped = seen & (np.linalg.norm(obs[:, 0:3] - heading, axis=1) > JUMP_M)
         if jumped.any():
-            self._clear(rows[jumped])
+            self.clear(rows[jumped])
             seen &= ~jumped
-        if seen.any():
+        if seen.any() and self.max_delay_steps > 0:
             self._observe(rows[seen], obs[seen, 3:6] - last[seen, 3:6], last[seen, 6])
         self._last[rows] = obs
-        out = obs.copy()
+        out = (
+            obs.copy()
+            if self.nav is None
+            else self.nav.estimate(obs, rows, self.applied(rows, obs))
+        )
+        start = out.copy()
         for d in range(1, self.max_delay_steps + 1):
             sel = self.delay_steps[rows] == d
             if sel.any():
@@ -190,8 +199,28 @@ class LatencyCompensator:
                 if self.thrust_model:
                     g = self.gain[rows[sel], d][:, None]
                     queued = np.einsum("bkij,bkj->bki", g, queued)
-                out[sel] = propagate(obs[sel], queued)
+                out[sel] = propagate(start[sel], queued)
         return out
+
+    def describe(self, row: int = 0) -> str:
+        """One phrase on what row's memory decided (the policy node's statistics line)."""
+        self.grow(row + 1)
+        out = f"actuation delay {self.delay_steps[row]} step(s)"
+        if self.nav is None:
+            return out
+        if not self.nav.engaged[row]:
+            return out + ", navigation filter standing by"
+        sd = np.sqrt(self.nav.noise_var[row])
+        return out + f", navigation filter on (noise {sd[0]:.1f} m, {sd[1]:.2f} m/s)"
+
+    def applied(self, rows: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """Acceleration (B, 3), m/s^2, that the command each row's lag says the plant flew over
+        the last step gives landers in states (B, 7) (its thrust matrix applied)."""
+        lag = self.delay_steps[rows]
+        cmd = self._issued[rows, lag]
+        if self.thrust_model:
+            cmd = np.einsum("bij,bj->bi", self.gain[rows, lag], cmd)
+        return cmd / states[:, 6:7] + GRAVITY_MPS2
 
     def _observe(self, r: np.ndarray, dv_mps: np.ndarray, mass_kg: np.ndarray) -> None:
         """Rows r saw the velocity change dv (B, 3) over the last step, at mass (B,): score the

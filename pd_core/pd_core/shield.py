@@ -17,6 +17,15 @@ braking (0.9 (T/m - g), 2.5 m/s^2 at 2000 kg), the shield to the thrust a shortf
 (0.9 T/m - g, 2.13 m/s^2), so the shield brakes a little earlier than the teacher's profile. A
 lander that cannot hover on the margin thrust may descend no faster than the land speed.
 
+A step that ends on the ground is judged by the speed of its touchdown (`touchdown_speed_mps`,
+1 m/s: half of Eq. 12's 2 m/s), not by the limit one step below the pad, which is the land speed
+(0.5 m/s): a free-falling step from a few centimetres reaches 0.7 m/s, so the limit fired full
+thrust there and bounced the lander back up, over and over. Light landers bounced highest
+(13 kN lifts a 1300 kg lander at 6 m/s^2), and gusts carried them off the pad meanwhile:
+ZEM/ZEV-vernier behind the shield landed 97.0 % of 1500-1700 kg landers under 4x gusts (300
+episodes, seed 95000000) and 100 % judged by the touchdown speed; the shipped policy 98.9 ->
+99.6 % (1000 episodes), and its nominal flights burn 2 kg less.
+
 Below `guard_altitude_m` (observed) a descending lander may not free-fall either (the touchdown
 guard): a zero vertical command is raised one level. Near the pad the limit above cannot help:
 one step of free fall adds 0.74 m/s, a step of actuation delay lets two such steps through
@@ -68,6 +77,7 @@ from pd_core.config import (
     HANDOVER_ALTITUDE_M,
     LAND_SPEED_MPS,
     MAX_DELAY_STEPS,
+    TOUCHDOWN_SPEED_MPS,
 )
 from pd_core.controllers import (
     VERNIER_PARAMS,
@@ -96,6 +106,12 @@ class ShieldParams:
     max_delay_steps: float = float(MAX_DELAY_STEPS)
     """longest actuation delay (0.2 s steps) identified in flight and predicted through
     (`pd_core.latency`; 0: decide on the observed state)"""
+    nav_filter: float = 1.0
+    """1: decide on the state `pd_core.navfilter` estimates where the navigation is noisy;
+    0: on the observed state"""
+    touchdown_speed_mps: float = TOUCHDOWN_SPEED_MPS
+    """a step that ends on the ground fires the braking limit only if the lander would touch
+    down faster than this (0: the limit holds below the pad too, as before)"""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.thrust_margin <= 1.0:
@@ -113,6 +129,13 @@ class ShieldParams:
         d = self.max_delay_steps
         if not (0.0 <= d <= 10.0 and d == int(d)):
             raise ValueError(f"shield max_delay_steps must be an integer in [0, 10], got {d}")
+        if self.nav_filter not in (0.0, 1.0):
+            raise ValueError(f"shield nav_filter must be 0 or 1, got {self.nav_filter}")
+        if not (self.touchdown_speed_mps == 0.0 or 0.1 <= self.touchdown_speed_mps < 2.0):
+            raise ValueError(
+                "shield touchdown_speed_mps must be 0 or in [0.1, 2), "
+                f"got {self.touchdown_speed_mps}"
+            )
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -146,7 +169,13 @@ def shield_mask(
     a_z = p.thrust_margin * np.asarray(vertical_thrust_n, dtype=float) / s[:, 6] - _G_MPS2
     vz = s[:, 5] + a_z * DT_S
     z = s[:, 2] + (s[:, 5] + 0.5 * a_z * DT_S) * DT_S
-    return -vz > max_descent_speed_mps(z, s[:, 6], max_vertical_thrust_n, p)
+    over = -vz > max_descent_speed_mps(z, s[:, 6], max_vertical_thrust_n, p)
+    # a step that ends on the ground is judged by the speed of the touchdown, not by the speed
+    # a whole step would reach below the pad
+    if p.touchdown_speed_mps <= 0.0:
+        return over
+    touchdown_sq = s[:, 5] ** 2 - 2.0 * a_z * np.maximum(s[:, 2], 0.0)
+    return np.where(z <= 0.0, touchdown_sq > p.touchdown_speed_mps**2, over)
 
 
 def guard_mask(
@@ -204,9 +233,9 @@ def shield_actions(
 
 def latency_for(p: ShieldParams | None) -> LatencyCompensator | None:
     """The latency compensation a shield asks for (None: none)."""
-    if p is None or p.max_delay_steps <= 0:
+    if p is None or (p.max_delay_steps <= 0 and not p.nav_filter):
         return None
-    return LatencyCompensator(int(p.max_delay_steps))
+    return LatencyCompensator(int(p.max_delay_steps), nav_filter=bool(p.nav_filter))
 
 
 class ShieldedActor(CompensatesLatency):

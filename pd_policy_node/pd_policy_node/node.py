@@ -62,8 +62,9 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "file",
         "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
         "than it can still brake, no free fall below 10 m, the teacher above 5 m where its "
-        "lateral limit binds; decisions on the state the command will meet, under an actuation "
-        "delay of up to 4 steps identified in flight): 'file' as the policy file's "
+        "lateral limit binds, touchdowns judged by their speed; decisions on the state the "
+        "command will meet, under an actuation delay of up to 4 steps identified in flight, "
+        "filtered where the navigation is noisy): 'file' as the policy file's "
         "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
@@ -229,7 +230,7 @@ class PolicyNode(Node):
     def _counts(self) -> str:
         shielded = getattr(self.policy, "shield_fired", 0)
         latency = getattr(self.policy, "latency", None)
-        delay = "" if latency is None else f", actuation delay {latency.delay_steps[0]} step(s)"
+        delay = "" if latency is None else f", {latency.describe()}"
         return (
             f"{self.answered} answered ({shielded} overridden by the shield{delay}), "
             f"{self.repeats} repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), "
