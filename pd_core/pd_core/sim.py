@@ -39,6 +39,7 @@ from pd_core.ocp import check_request
 
 MISSING_COMMAND_MODES = ("hold", "zero")
 MAX_SIM_DELAY_STEPS = 50  # as pd_core.dispersions.Dispersions.delay_steps
+MAX_NAV_SIGMA = (50.0, 5.0)  # largest navigation noise the simulator adds (m, m/s)
 
 # A command's thrust must equal the table thrust of its action to this tolerance (N). The policy
 # sends the table value itself, so anything beyond rounding is a sender bug or a tampered message.
@@ -193,7 +194,11 @@ class Simulator:
         seed: int | None = None,
         command_source: str = "",
         delay_steps: int = 0,
+        nav_sigma: tuple[float, float] = (0.0, 0.0),
     ) -> None:
+        for value, top, unit in zip(nav_sigma, MAX_NAV_SIGMA, ("m", "m/s"), strict=True):
+            if not (math.isfinite(value) and 0.0 <= value <= top):
+                raise ValueError(f"navigation noise must be in [0, {top:g}] {unit}, got {value!r}")
         if not (isinstance(delay_steps, int) and 0 <= delay_steps <= MAX_SIM_DELAY_STEPS):
             raise ValueError(
                 f"delay_steps must be an integer in [0, {MAX_SIM_DELAY_STEPS}], got {delay_steps!r}"
@@ -219,6 +224,11 @@ class Simulator:
         """actuation delay: the plant flies the command of this many steps earlier (a FIFO
         filled with zero thrust at reset, as `pd_core.dispersions`' `delay_steps`)"""
         self._fifo: deque[tuple[float, float, float]] = deque()
+        self.nav_sigma = np.array([nav_sigma[0]] * 3 + [nav_sigma[1]] * 3 + [0.0])
+        """white noise (sd per axis, drawn each step) on the state published: position, velocity,
+        none on the mass (as pd_core.dispersions' nav_* dispersions)"""
+        self._nav_rng = np.random.default_rng([seed if seed is not None else 0, 1])
+        self._nav_noise = np.zeros(7)
         self.counters = Counters()
         self.episode = 0  # number of the current (or last) episode; 0 before the first
         self.flying = False
@@ -240,6 +250,11 @@ class Simulator:
     @property
     def state(self) -> np.ndarray:
         return self.env.state
+
+    @property
+    def observed_state(self) -> np.ndarray:
+        """The state as navigation reports it: the true state plus this step's noise."""
+        return self.env.state + self._nav_noise
 
     @property
     def status(self) -> Status:
@@ -279,6 +294,9 @@ class Simulator:
         self._pending = None
         self._last_action = None
         self._fifo = deque([(0.0, 0.0, 0.0)] * self.delay_steps)
+        if seed is not None:
+            self._nav_rng = np.random.default_rng([seed, 1])  # a stream apart from the env's
+        self._draw_nav_noise()
         self._ep_rejected = 0
         self._ep_missed = 0
         self.counters.episodes_started += 1
@@ -334,6 +352,7 @@ class Simulator:
             self._fifo.append(thrust)
             thrust = self._fifo.popleft()
         _, _, terminated, truncated, info = self.env.step_thrust(thrust)
+        self._draw_nav_noise()
         self.counters.steps += 1
         self._status = Status(info["status"])
         result = None
@@ -341,6 +360,10 @@ class Simulator:
         if done:
             result = self._finish(self._status)
         return StepOutcome(action, thrust, fresh, self._status, done, result)
+
+    def _draw_nav_noise(self) -> None:
+        if self.nav_sigma.any():
+            self._nav_noise = self._nav_rng.normal(size=7) * self.nav_sigma
 
     def _finish(self, status: Status) -> dict[str, Any]:
         s = self.env.state

@@ -33,6 +33,7 @@ from rclpy.node import Node
 
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S
 from pd_core.sim import (
+    MAX_NAV_SIGMA,
     MAX_SIM_DELAY_STEPS,
     MISSING_COMMAND_MODES,
     FixedRateTicker,
@@ -118,6 +119,16 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "(0.2 s each) earlier, zero thrust before the first (as pd-eval's delay_steps "
         "dispersion). 0 = none.",
     ),
+    "nav_position_sigma_m": (
+        0.0,
+        "Navigation noise for filter tests: white Gaussian noise (m, per axis, drawn each step) "
+        "on the published position, as pd-eval's nav_position_sigma_m dispersion. The episode "
+        "result keeps the true state. 0 = none.",
+    ),
+    "nav_velocity_sigma_mps": (
+        0.0,
+        "As nav_position_sigma_m, on the published velocity (m/s). 0 = none.",
+    ),
     "command_source": (
         "",
         "Name of the one node whose thrust commands fly (e.g. pd_policy_node): commands from "
@@ -139,6 +150,12 @@ CHECKS: dict[str, params.Check] = {
         None if 0 <= v <= MAX_SIM_DELAY_STEPS else f"must be in [0, {MAX_SIM_DELAY_STEPS}]"
     ),
     "log_rejections": params.at_least(0),
+    "nav_position_sigma_m": lambda v: (
+        None if 0.0 <= v <= MAX_NAV_SIGMA[0] else f"must be in [0, {MAX_NAV_SIGMA[0]:g}]"
+    ),
+    "nav_velocity_sigma_mps": lambda v: (
+        None if 0.0 <= v <= MAX_NAV_SIGMA[1] else f"must be in [0, {MAX_NAV_SIGMA[1]:g}]"
+    ),
     "command_source": lambda v: (
         None
         if re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)?", v)
@@ -170,6 +187,7 @@ class SimNode(Node):
             seed=p["seed"] if p["seed"] >= 0 else None,
             command_source=p["command_source"],
             delay_steps=p["delay_steps"],
+            nav_sigma=(p["nav_position_sigma_m"], p["nav_velocity_sigma_mps"]),
         )
         self._restart_due = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command
@@ -312,7 +330,7 @@ class SimNode(Node):
 
     def _publish_state(self) -> None:
         s = self._sim
-        self._state_pub.publish(state_msg(s.episode, s.step, s.time_s, s.state, s.status))
+        self._state_pub.publish(state_msg(s.episode, s.step, s.time_s, s.observed_state, s.status))
         self._last_publish = time.monotonic()
 
     def _publish_result(self, result: dict[str, Any]) -> None:

@@ -245,6 +245,36 @@ def test_an_actuation_delay_flies_each_command_that_many_steps_late():
             Simulator(delay_steps=bad)
 
 
+def test_navigation_noise_is_white_on_position_and_velocity_and_repeats_with_the_seed():
+    """nav_sigma (3 m, 0.3 m/s): the published state is the true one plus noise of that spread
+    (within 15 % over 300 steps x 3 axes), none on the mass; the same seed, the same noise; the
+    flight itself (true state) does not depend on it."""
+
+    def fly(sigma):
+        sim = Simulator(nav_sigma=sigma)
+        ep, _, _ = sim.reset(seed=5)
+        err, true = [], []
+        for k in range(300):
+            err.append(sim.observed_state - sim.state)
+            true.append(sim.state.copy())
+            sim.submit(cmd(ep, k, int(DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 1])))))
+            if sim.advance().done:
+                break
+        return np.array(err), np.array(true)
+
+    err, true = fly((3.0, 0.3))
+    np.testing.assert_allclose(err[:, 0:3].std(), 3.0, rtol=0.15)
+    np.testing.assert_allclose(err[:, 3:6].std(), 0.3, rtol=0.15)
+    assert not err[:, 6].any()
+    np.testing.assert_array_equal(fly((3.0, 0.3))[0], err)
+    quiet, true0 = fly((0.0, 0.0))
+    assert not quiet.any()
+    np.testing.assert_array_equal(true0, true)
+    for bad in ((-1.0, 0.0), (0.0, float("nan")), (51.0, 0.0)):
+        with pytest.raises(ValueError, match="navigation noise must be in"):
+            Simulator(nav_sigma=bad)
+
+
 def test_free_fall_crashes_with_reason_and_stops():
     sim = Simulator(disturbance=False)
     sim.reset(initial_state=[0.0, 0.0, 50.0, 0.0, 0.0, -20.0, 2000.0])
