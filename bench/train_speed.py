@@ -142,7 +142,8 @@ def loop_costs_us(seconds: float) -> dict[str, float]:
 def act_time_us(seconds: float) -> tuple[float, float, float, float, float]:
     """Policy.act through numpy, the same behind the shield (a Table 3 state; a wide-box corner
     state the shield hands to the teacher), Policy.act_online predicting through two steps of
-    identified delay (pd_core.latency), torch forward+argmax."""
+    identified delay (pd_core.latency) from the navigation filter's estimate (pd_core.navfilter),
+    torch forward+argmax."""
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as d:
         path = save_policy(Path(d) / "m", QNetwork())
@@ -229,7 +230,7 @@ def main() -> None:
     print(
         f"   Policy.act(one state): numpy {us:.1f} us; behind the shield {ussh:.1f} us "
         f"({ussh / us:.2f}x), {usho:.1f} us ({usho / us:.2f}x) where it hands over to the "
-        f"teacher; act_online through 2 steps of identified delay {uslat:.1f} us "
+        f"teacher; act_online (navigation filter, 2 steps of identified delay) {uslat:.1f} us "
         f"({uslat / us:.2f}x); torch forward+argmax {ust:.1f} us"
     )
 
