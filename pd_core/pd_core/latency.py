@@ -26,6 +26,10 @@ of two steps of delay, predicting on the nominal plant left the shipped policy a
 60000000; 98.4 % at 70000000) and the identified plant 100.0 % (99.8 %); with 3 m / 0.3 m/s of
 navigation noise, 99.0 % against 99.2 % (98.4 % against 98.6 %); 500 episodes each.
 
+Where the navigation is noisy the prediction starts from the navigation filter's estimate
+(`pd_core.navfilter`, fed with the command this lag and matrix say the plant flew) instead of the
+observed state; the lag is still identified on the observed velocities.
+
 One lander per row: `LatencyCompensator` keeps the commands issued and the scores of each row;
 `CompensatesLatency` puts it in front of a policy or a shielded controller, as the shield
 settings ask (`ShieldParams.max_delay_steps`): `pd_core.evaluate.fly_episodes` tells it which

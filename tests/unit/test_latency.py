@@ -118,16 +118,22 @@ def test_the_shipped_policy_lands_through_delays_it_loses_without_compensation()
     assert rates[2, False] <= 0.9 and rates[4, False] <= 0.3
 
 
-def test_a_simulator_reset_clears_the_memory():
-    comp = LatencyCompensator(4)
+@pytest.mark.parametrize("nav_filter", [False, True])
+def test_a_simulator_reset_clears_the_memory(nav_filter):
+    comp = LatencyCompensator(4, nav_filter=nav_filter)
     s = np.array([[0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0]])
     comp.predict(s, np.array([0]))
     comp.record(np.array([0]), np.array([[0.0, 0.0, 13e3]]))
     comp.delay_steps[0] = 3
+    if nav_filter:
+        comp.nav.engaged[0], comp.nav._steps[0] = True, 50
     s2 = s.copy()
     s2[0, 2] = 2500.0  # a new episode: 1.5 km above where the lander was heading
     np.testing.assert_array_equal(comp.predict(s2, np.array([0])), s2)
     assert comp.delay_steps[0] == 0 and not comp._issued.any()
+    if nav_filter:  # the filter starts again from this observation
+        assert not comp.nav.engaged[0] and comp.nav._steps[0] == 0
+        np.testing.assert_array_equal(comp.nav._x[0, :, 0], s2[0, 0:3])
 
 
 def test_policy_files_carry_the_setting_and_refuse_a_bad_one(tmp_path):
