@@ -4,8 +4,9 @@ The observed state carries white navigation noise (`Dispersions.nav_*`): 1-4 m o
 axis and 0.1-0.4 m/s on each velocity axis, drawn afresh each 0.2 s step. Deciding on it, the
 shipped policy lost landers that hovered over the pad until gusts and their own lateral
 commands on noisy velocities carried them off it (4 m / 0.4 m/s: 93.9 %, seed 95000000, 1000
-episodes). A flight computer does not fly raw measurements: it filters them through the
-dynamics it knows, and here it knows them well, since it issued the commands.
+episodes; 99.9 % on this filter's estimate, with the touchdown judgement of `pd_core.shield`).
+A flight computer does not fly raw measurements: it filters them through the dynamics it knows,
+and here it knows them well, since it issued the commands.
 
 Each axis carries a Kalman filter on [position, velocity, unmodelled acceleration]:
 - the prediction flies the command the plant applied over the last step (the lag and thrust
@@ -38,7 +39,9 @@ N moves a 2 t lander's velocity by 0.03 m/s in a step)"""
 UNMODELLED_ACCEL_MPS2 = 0.3
 """white acceleration the model lacks, per axis: gusts (600 N on 2 t at 6x the Table 3 sigma)"""
 BIAS_WALK_MPS2 = 0.2
-"""per-step change of the unmodelled steady acceleration (a thrust error shows within ~10 steps)"""
+"""per-step change of the unmodelled steady acceleration: one vertical level change (6.5 kN) on a
+2 t lander through a 6 % thrust error or 3 deg of misalignment; 0.05 lagged those changes and
+lost `all-broad` (99.45 against 99.85 %, 2000 episodes, seed 83000000)"""
 FORGET_PER_STEP = 0.97
 """weight of a one-step-older sample in the noise estimate (a memory of ~30 steps)"""
 WARM_STEPS = 10
