@@ -35,7 +35,7 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
-from pd_core.shield import ShieldedActor
+from pd_core.shield import ShieldedActor, ShieldParams, latency_for
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -54,9 +54,15 @@ def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
     """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies as its
     metadata says (with the braking shield of `pd_core.shield` if it asks for it); `bare:<file>`
     flies the network alone, `shield:<file>` behind the default shield, and
-    `shield:controller:<name>` the reference controller behind it."""
+    `shield:controller:<name>` the reference controller behind it. `set:K=V[,K=V...]:<spec>`
+    flies <spec> with those runtime-layer settings changed (`ShieldParams`: an ablation by flag,
+    e.g. `set:nav_filter=0,touchdown_speed_mps=0:models/pd_dqn_robust.pt`)."""
     if callable(spec):
         return spec(), getattr(spec, "__name__", "agent")
+    if spec.startswith("set:"):
+        settings, _, inner = spec[len("set:") :].partition(":")
+        actor, label = load_actor(inner)
+        return with_settings(actor, settings), f"{label} ({settings})"
     if spec.startswith("shield:controller:"):
         name = spec.split(":", 2)[2]
         return ShieldedActor(make_controller(name)), f"controller {name} + shield"
@@ -68,6 +74,31 @@ def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
             path = spec[len(prefix) :]
             return load_policy(path, shield=mode), Path(path).stem
     return load_policy(spec), Path(spec).stem
+
+
+def with_settings(actor: Actor, settings: str) -> Actor:
+    """The actor with the runtime-layer settings "K=V,K=V" (`ShieldParams` fields) changed;
+    ValueError in one line for an actor without that layer or a bad setting."""
+    if getattr(actor, "shield", None) is None:
+        raise ValueError(
+            f"set:{settings}: the agent has no runtime layer to change (use a policy file "
+            "that asks for the shield, shield:FILE or shield:controller:NAME)"
+        )
+    changes: dict[str, float] = {}
+    for item in filter(None, settings.split(",")):
+        key, eq, value = item.partition("=")
+        try:
+            changes[key.strip()] = float(value)
+        except ValueError:
+            eq = ""
+        if not eq:
+            raise ValueError(f"set:{settings}: {item!r} is not KEY=NUMBER")
+    try:
+        actor.shield = ShieldParams.from_dict({**actor.shield.to_dict(), **changes})
+    except ValueError as exc:
+        raise ValueError(f"set:{settings}: {exc}") from None
+    actor.latency = latency_for(actor.shield)
+    return actor
 
 
 @dataclass(frozen=True)

@@ -299,3 +299,23 @@ def test_a_reference_controller_flies_behind_the_same_shield():
     assert actor.shield_fired == fired.sum() > 0
     assert actor.act(s[0]) == want[0]
     np.testing.assert_array_equal(actor.thrust(want[1]), DEFAULT_ACTIONS.thrust(want[1]))
+
+
+def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
+    """pd-eval's `set:K=V,...:SPEC`: an ablation by flag, refused in one line where it cannot
+    apply (a bare controller, an unknown or non-numeric setting, an out-of-range value)."""
+    actor, label = load_actor(f"set:nav_filter=0,touchdown_speed_mps=0:{ROBUST}")
+    assert actor.shield.nav_filter == 0.0 and actor.shield.touchdown_speed_mps == 0.0
+    assert actor.latency.nav is None and actor.latency.max_delay_steps == 4
+    assert label == "pd_dqn_robust (nav_filter=0,touchdown_speed_mps=0)"
+    ctrl, _ = load_actor("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev")
+    assert ctrl.latency is None and ctrl.shield.guard_altitude_m == P.guard_altitude_m
+    for spec, says in (
+        ("set:nav_filter=0:controller:zemzev", "no runtime layer"),
+        (f"set:gain=1:{ROBUST}", "unknown shield setting"),
+        (f"set:nav_filter:{ROBUST}", "is not KEY=NUMBER"),
+        (f"set:touchdown_speed_mps=3:{ROBUST}", "touchdown_speed_mps must be"),
+    ):
+        with pytest.raises(ValueError, match=says) as err:
+            load_actor(spec)
+        assert "\n" not in str(err.value)

@@ -78,7 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="other policies (or controllers as NAME=controller:zemzev) flown on the same "
         "episodes: Table 7 blocks side by side, Figs. 5 and 7. A file flies as its metadata "
         "says (braking shield or not); bare:FILE flies the network alone, shield:FILE behind "
-        "the default braking shield, shield:controller:NAME the controller behind it",
+        "the default braking shield, shield:controller:NAME the controller behind it; "
+        "set:K=V,K=V:SPEC flies SPEC with those runtime-layer settings changed (e.g. "
+        "set:nav_filter=0,touchdown_speed_mps=0:FILE)",
     )
     p.add_argument(
         "--training-log",
