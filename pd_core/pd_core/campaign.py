@@ -35,7 +35,7 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
-from pd_core.shield import ShieldedActor, ShieldParams, latency_for
+from pd_core.shield import ShieldedActor, with_settings
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -74,31 +74,6 @@ def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
             path = spec[len(prefix) :]
             return load_policy(path, shield=mode), Path(path).stem
     return load_policy(spec), Path(spec).stem
-
-
-def with_settings(actor: Actor, settings: str) -> Actor:
-    """The actor with the runtime-layer settings "K=V,K=V" (`ShieldParams` fields) changed;
-    ValueError in one line for an actor without that layer or a bad setting."""
-    if getattr(actor, "shield", None) is None:
-        raise ValueError(
-            f"set:{settings}: the agent has no runtime layer to change (use a policy file "
-            "that asks for the shield, shield:FILE or shield:controller:NAME)"
-        )
-    changes: dict[str, float] = {}
-    for item in filter(None, settings.split(",")):
-        key, eq, value = item.partition("=")
-        try:
-            changes[key.strip()] = float(value)
-        except ValueError:
-            eq = ""
-        if not eq:
-            raise ValueError(f"set:{settings}: {item!r} is not KEY=NUMBER")
-    try:
-        actor.shield = ShieldParams.from_dict({**actor.shield.to_dict(), **changes})
-    except ValueError as exc:
-        raise ValueError(f"set:{settings}: {exc}") from None
-    actor.latency = latency_for(actor.shield)
-    return actor
 
 
 @dataclass(frozen=True)

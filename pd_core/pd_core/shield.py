@@ -271,3 +271,29 @@ class ShieldedActor(CompensatesLatency):
         if actor is None:  # not constructed (e.g. while unpickling)
             raise AttributeError(name)
         return getattr(actor, name)
+
+
+def with_settings(actor: Any, settings: str) -> Any:
+    """The actor (a policy or a `ShieldedActor`) with the runtime-layer settings "K=V,K=V"
+    (`ShieldParams` fields) changed: pd-eval's `set:` specs and the policy node's
+    `shield_settings`. ValueError in one line for an actor without that layer or a bad setting."""
+    if getattr(actor, "shield", None) is None:
+        raise ValueError(
+            f"runtime settings {settings!r}: the agent has no runtime layer to change (a policy "
+            "file that asks for the braking shield, or one flown behind it, has)"
+        )
+    changes: dict[str, float] = {}
+    for item in filter(None, settings.split(",")):
+        key, eq, value = item.partition("=")
+        try:
+            changes[key.strip()] = float(value)
+        except ValueError:
+            eq = ""
+        if not eq:
+            raise ValueError(f"runtime settings {settings!r}: {item!r} is not KEY=NUMBER")
+    try:
+        actor.shield = ShieldParams.from_dict({**actor.shield.to_dict(), **changes})
+    except ValueError as exc:
+        raise ValueError(f"runtime settings {settings!r}: {exc}") from None
+    actor.latency = latency_for(actor.shield)
+    return actor

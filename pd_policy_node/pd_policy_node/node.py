@@ -30,7 +30,7 @@ from rclpy.node import Node
 import pd_core
 from pd_core.config import TABLE3
 from pd_core.policy import SHIELD_MODES, PolicyLoadError
-from pd_core.shield import ShieldedActor
+from pd_core.shield import ShieldedActor, with_settings
 from pd_core.state import check_state
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_ros_common import names, params, qos
@@ -68,6 +68,14 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
+    "shield_settings": (
+        "",
+        "Runtime-layer settings changed from what 'shield' gives, as K=V,K=V (fields of "
+        "pd_core.shield.ShieldParams, e.g. 'nav_filter=0,touchdown_speed_mps=0' for an "
+        "ablation in the closed loop; pd-eval's set:K=V,...:SPEC does the same offline). "
+        "Refused at start-up in one line where there is no shield or a setting is bad. "
+        "Empty = none.",
+    ),
     "stats_period_s": (
         10.0,
         "Log decision-time statistics (p50/p99/max of the state->command callback) every this "
@@ -95,11 +103,14 @@ def default_model_path() -> Path:
     return candidates[0]
 
 
-def load_controller(name: str, model_path: str, shield: str = "file") -> tuple[Any, str]:
-    """(controller with act/thrust, description); PolicyLoadError if it cannot be made."""
+def load_controller(
+    name: str, model_path: str, shield: str = "file", settings: str = ""
+) -> tuple[Any, str]:
+    """(controller with act/thrust, description); PolicyLoadError if it cannot be made.
+    `settings` "K=V,K=V" changes the runtime layer (`pd_core.shield.with_settings`)."""
     if name == DQN:
         path = Path(model_path) if model_path else default_model_path()
-        policy = pd_core.load_policy(path, shield=shield)
+        policy = _with_settings(pd_core.load_policy(path, shield=shield), settings)
         meta = policy.metadata
         guard = "no braking shield" if policy.shield is None else f"braking shield {policy.shield}"
         return policy, (
@@ -114,9 +125,18 @@ def load_controller(name: str, model_path: str, shield: str = "file") -> tuple[A
     except ValueError as exc:
         raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from exc
     if shield == "always":  # a controller has no file to ask for it: only "always" shields it
-        controller = ShieldedActor(controller)
+        controller = _with_settings(ShieldedActor(controller), settings)
         return controller, f"reference controller {name}, braking shield {controller.shield}"
-    return controller, f"reference controller {name}"
+    return _with_settings(controller, settings), f"reference controller {name}"
+
+
+def _with_settings(actor: Any, settings: str) -> Any:
+    if not settings:
+        return actor
+    try:
+        return with_settings(actor, settings)
+    except ValueError as exc:
+        raise PolicyLoadError(str(exc)) from None
 
 
 class PolicyNode(Node):
@@ -126,7 +146,9 @@ class PolicyNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = params.declare(self, PARAMETERS, CHECKS)
         self.controller_name = p["controller"]
-        self.policy, described = load_controller(p["controller"], p["model_path"], p["shield"])
+        self.policy, described = load_controller(
+            p["controller"], p["model_path"], p["shield"], p["shield_settings"]
+        )
         if self.controller_name == DQN:
             # Warm up numpy so the first real state is answered as fast as the rest (not the
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).

@@ -1,5 +1,6 @@
 """Start-up parameters of the nodes: checked with the run-time check, one line when wrong,
-integers accepted for doubles (issue 9 items 10 and 11), an unknown controller refused."""
+integers accepted for doubles (issue 9 items 10 and 11), an unknown controller or runtime setting
+refused, a good runtime setting flown."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ def _run_until_exit(tmp_path, package: str, params: dict) -> tuple[int, str]:
         ("pd_policy_node", {"stats_period_s": -1}, 2, "parameter stats_period_s: must be >= 0"),
         ("pd_policy_node", {"controller": "nope"}, 1, "controller 'nope': unknown controller"),
         ("pd_policy_node", {"shield": "maybe"}, 2, "parameter shield: must be one of file, always"),
+        ("pd_policy_node", {"shield_settings": "gain=1"}, 1, "unknown shield setting(s): gain"),
     ],
 )
 def test_bad_start_up_parameter_is_one_line(tmp_path, package, params, code, says):
@@ -52,5 +54,19 @@ def test_integers_accepted_for_doubles(tmp_path):
         for p in (sim, ocp, pol):
             assert p.stop() == 0, p.log()
             assert "Traceback" not in p.log() and "context is invalid" not in p.log(), p.log()
+    finally:
+        procs.stop_all()
+
+
+def test_runtime_settings_change_the_layer_the_policy_flies(tmp_path):
+    """shield_settings 'nav_filter=0,touchdown_speed_mps=0': the node says which layer it flies."""
+    procs = ProcessSet(tmp_path)
+    try:
+        pol = procs.node(
+            "pd_policy_node", {"shield_settings": "nav_filter=0,touchdown_speed_mps=0"}
+        )
+        assert pol.wait_log("policy ready", START_S), pol.log()
+        assert "nav_filter=0.0, touchdown_speed_mps=0.0" in pol.log(), pol.log()
+        assert pol.stop() == 0, pol.log()
     finally:
         procs.stop_all()
