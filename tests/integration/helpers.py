@@ -23,12 +23,16 @@ __all__ = [
     "ProcessSet",
     "ROOT",
     "executable",
+    "fly_shipped_policy_over_ros",
+    "fly_shipped_policy_offline",
     "make_model",
     "offline_rollout",
     "ros_args",
     "table3_state",
     "wait_for",
 ]
+
+START_S = 90.0  # node start-up deadline on a loaded 2-core machine (torch import)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -63,3 +67,58 @@ def offline_rollout(model: Path, seed: int, initial_state: np.ndarray) -> list[n
 def table3_state(seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return rng.uniform(TABLE3.lo, TABLE3.hi)
+
+
+def fly_shipped_policy_offline(sim, seed: int):
+    """(final true state, policy) of one episode of pd_core's `Simulator` `sim` flown in-process
+    by the shipped policy deciding online on the published (observed) state, as the node does."""
+    from pd_core.policy import load_policy
+    from pd_core.sim import Command
+    from pd_policy_node.node import default_model_path
+
+    policy = load_policy(default_model_path())
+    episode, _, _ = sim.reset(seed=seed)
+    policy.begin_episodes(1)
+    while True:
+        a = policy.act_online(sim.observed_state)
+        sim.submit(Command(episode, sim.step, a, tuple(float(v) for v in policy.thrust(a))))
+        if sim.advance().done:
+            return sim.state, policy
+
+
+def fly_shipped_policy_over_ros(tmp_path: Path, make_node, spin_until, sim_params: dict, seed: int):
+    """(EpisodeResult, policy node log) of one lockstep episode (seed `seed`) of a real
+    pd_sim_node (`sim_params` added) and pd_policy_node in separate processes; the policy node
+    has stopped (status 0) when this returns."""
+    from pd_interfaces.msg import EpisodeResult
+    from pd_interfaces.srv import ResetEpisode
+    from pd_ros_common import qos
+    from pd_ros_common.convert import reset_request
+
+    procs = ProcessSet(tmp_path)
+    try:
+        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False, **sim_params})
+        policy = procs.node("pd_policy_node", {})
+        assert sim.wait_log("simulator ready", START_S), procs.logs()
+        assert policy.wait_log("policy ready", START_S), procs.logs()
+        probe = make_node("episode_probe")
+        results: list[EpisodeResult] = []
+        probe.create_subscription(EpisodeResult, "/lander/episode", results.append, qos.EPISODE_QOS)
+        reset = probe.create_client(ResetEpisode, "/sim/reset")
+        assert spin_until(reset.service_is_ready, 20.0)
+        assert spin_until(
+            lambda: (
+                probe.count_subscribers("/lander/state") >= 1
+                and probe.count_publishers("/lander/thrust_cmd") >= 1
+            ),
+            30.0,
+        )
+        spin_until(lambda: False, 0.5)
+        future = reset.call_async(reset_request(None, seed))
+        assert spin_until(future.done, 20.0) and future.result().success
+        episode = future.result().episode
+        assert spin_until(lambda: any(r.episode == episode for r in results), 120.0)
+        assert policy.stop() == 0, policy.log()
+        return next(r for r in results if r.episode == episode), policy.log()
+    finally:
+        procs.stop_all()
