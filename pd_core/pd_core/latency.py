@@ -65,6 +65,10 @@ FORCE_NOISE_N = 1000.0
 """prior spread of one step's measured force per axis, m dv / dt (0.1 m/s of velocity noise on a
 2 t lander gives 1400 N; 100 N of disturbance without it); then the lander's own residuals
 decide it (`LatencyCompensator.force_noise_var`)"""
+SHORTFALL_SD = 3.0
+"""standard deviations of its estimate added to the identified vertical gain before the braking
+shield counts on it (`vertical_thrust_scale`): a shortfall it acts on is one the measurements
+show, not the estimate's noise on an engine that delivers what it should"""
 JUMP_M = 50.0
 """a row whose observed position is this far from where its last observation was heading
 starts a new episode (a reset of the simulator): its memory is cleared"""
@@ -206,6 +210,19 @@ class LatencyCompensator(RowMemory):
                 out[sel] = propagate(start[sel], queued)
         return out
 
+    def vertical_thrust_scale(self, rows: np.ndarray, n_sd: float = SHORTFALL_SD) -> np.ndarray:
+        """(B,) delivered over commanded vertical thrust of rows (B,) as far as the evidence
+        shows it short: their lag's identified vertical gain (the thrust error and the
+        misalignment's cosine together) plus `n_sd` of its standard deviation, so an engine
+        that delivers what it should reads >= 1 (1 where nothing is identified)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        self.grow(int(rows.max()) + 1 if len(rows) else 0)
+        if self.max_delay_steps == 0 or not self.thrust_model:
+            return np.ones(len(rows))
+        lag = self.delay_steps[rows]
+        sd = np.sqrt(np.maximum(self._cov[rows, lag, 2, 2], 0.0))
+        return self.gain[rows, lag, 2, 2] + n_sd * sd
+
     def describe(self, row: int = 0) -> str:
         """One phrase on what row's memory decided (the policy node's statistics line)."""
         self.grow(row + 1)
@@ -279,7 +296,8 @@ class CompensatesLatency:
         if self.latency is None:
             return self.act_batch(states)
         predicted = self.latency.predict(states, rows)
-        actions = np.asarray(self.act_batch(predicted), dtype=np.int64)
+        scale = self.latency.vertical_thrust_scale(rows)
+        actions = np.asarray(self.act_batch(predicted, vertical_thrust_scale=scale), dtype=np.int64)
         self.latency.record(rows, self.actions.table_n[actions])
         return actions
 

@@ -138,12 +138,17 @@ class Policy(CompensatesLatency):
         """Greedy action index for one physical state (7,)."""
         return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
 
-    def act_batch(self, states: np.ndarray) -> np.ndarray:
-        """Greedy actions (B,) for physical states (B, 7), shielded if the file says so."""
+    def act_batch(
+        self, states: np.ndarray, vertical_thrust_scale: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Greedy actions (B,) for physical states (B, 7), shielded if the file says so (with the
+        measured vertical thrust fraction (B,), if given: `pd_core.shield.shield_actions`)."""
         greedy = np.argmax(self.q_values(states), axis=-1)
         if self.shield is None:
             return greedy
-        shielded, fired = shield_actions(greedy, states, self.actions, self.shield)
+        shielded, fired = shield_actions(
+            greedy, states, self.actions, self.shield, vertical_thrust_scale
+        )
         self.shield_fired += int(fired.sum())
         return shielded
 

@@ -27,10 +27,14 @@ class NetActor(CompensatesLatency):
         self.actions = DEFAULT_ACTIONS
         self.latency = latency_for(shield)
 
-    def act_batch(self, states: np.ndarray) -> np.ndarray:
+    def act_batch(
+        self, states: np.ndarray, vertical_thrust_scale: np.ndarray | None = None
+    ) -> np.ndarray:
         with torch.no_grad():
             q = self.net(torch.from_numpy(scale_state(states)))
         greedy = q.argmax(dim=1).numpy()
         if self.shield is None:
             return greedy
-        return shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield)[0]
+        return shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield, vertical_thrust_scale)[
+            0
+        ]
