@@ -142,7 +142,7 @@ GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_co
 # slower than the land speed fall freely (pd_core.shield: the hover trap of light landers)
 GUARD_CLIMB_MPS2 = 1.0
 HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
-MAX_DELAY_STEPS = 4  # ours: longest actuation delay (0.8 s) identified in flight (pd_core.latency)
+MAX_DELAY_STEPS = 8  # ours: longest actuation delay (1.6 s) identified in flight (pd_core.latency)
 
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
 

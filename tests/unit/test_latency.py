@@ -160,11 +160,11 @@ def test_a_simulator_reset_clears_the_memory(nav_filter):
 
 
 def test_policy_files_carry_the_setting_and_refuse_a_bad_one(tmp_path):
-    """Files written before the setting get the default (4 steps); 0 turns it off; a fraction
+    """Files written before the setting get the default (8 steps); 0 turns it off; a fraction
     or a negative number of steps is refused in one line."""
     meta = json.loads(Path(ROBUST).with_suffix(".json").read_text())
     assert "max_delay_steps" not in meta["shield"]
-    assert load_policy(ROBUST).latency.max_delay_steps == 4
+    assert load_policy(ROBUST).latency.max_delay_steps == 8
     assert latency_for(ShieldParams(max_delay_steps=0, nav_filter=0)) is None
     assert latency_for(ShieldParams(max_delay_steps=0)).max_delay_steps == 0  # filter only
     assert latency_for(None) is None

@@ -338,7 +338,7 @@ def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
     apply (a bare controller, an unknown or non-numeric setting, an out-of-range value)."""
     actor, label = load_actor(f"set:nav_filter=0,touchdown_speed_mps=0:{ROBUST}")
     assert actor.shield.nav_filter == 0.0 and actor.shield.touchdown_speed_mps == 0.0
-    assert actor.latency.nav is None and actor.latency.max_delay_steps == 4
+    assert actor.latency.nav is None and actor.latency.max_delay_steps == 8
     assert label == "pd_dqn_robust (nav_filter=0,touchdown_speed_mps=0)"
     ctrl, _ = load_actor("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev")
     assert ctrl.latency is None and ctrl.shield.guard_altitude_m == P.guard_altitude_m
