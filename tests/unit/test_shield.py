@@ -150,15 +150,15 @@ def test_the_braking_limit_counts_on_the_measured_thrust_where_it_is_short():
 
 def test_the_shipped_policy_lands_a_15_percent_shortfall_by_the_measured_thrust():
     """Thrust errors up to 15 % (beyond the 8 % trained on): counting on the nominal thrust,
-    the limit braked too late for the weakest engines (92.5 % of 200 episodes, seed 123000000;
-    touchdowns at 12 m/s); counting on what the engine was measured to deliver, 100 %."""
+    the limit braked too late for the weakest engines (86.5 % of these 200 episodes); counting on
+    what the engine was measured to deliver, 99.0 %."""
     d = Dispersions("thrust15", thrust_error=0.15)
     rates = []
     for on in (1.0, 0.0):
         policy = load_policy(ROBUST)
         policy.shield = dataclasses.replace(policy.shield, measured_thrust=on)
         rates.append(rollout(policy, 200, 9_800_000, dispersions=d).landed.mean())
-    assert rates[0] >= 0.99 and rates[1] <= 0.96, rates
+    assert rates[0] >= 0.975 and rates[1] <= 0.93, rates
 
 
 def test_light_landers_in_gusts_touch_down_instead_of_bouncing():
