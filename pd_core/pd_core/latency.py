@@ -227,6 +227,9 @@ class LatencyCompensator(RowMemory):
         """One phrase on what row's memory decided (the policy node's statistics line)."""
         self.grow(row + 1)
         out = f"actuation delay {self.delay_steps[row]} step(s)"
+        short = float(self.vertical_thrust_scale(np.array([row]))[0])
+        if short < 1.0:
+            out += f", vertical thrust {100.0 * short:.0f} % of nominal"
         if self.nav is None:
             return out
         if not self.nav.engaged[row]:

@@ -40,6 +40,7 @@ from pd_core.ocp import check_request
 MISSING_COMMAND_MODES = ("hold", "zero")
 MAX_SIM_DELAY_STEPS = 50  # as pd_core.dispersions.Dispersions.delay_steps
 MAX_NAV_SIGMA = (50.0, 5.0)  # largest navigation noise the simulator adds (m, m/s)
+THRUST_SCALE_RANGE = (0.5, 1.5)  # delivered / commanded thrust the simulator accepts
 
 # A command's thrust must equal the table thrust of its action to this tolerance (N). The policy
 # sends the table value itself, so anything beyond rounding is a sender bug or a tampered message.
@@ -195,7 +196,11 @@ class Simulator:
         command_source: str = "",
         delay_steps: int = 0,
         nav_sigma: tuple[float, float] = (0.0, 0.0),
+        thrust_scale: float = 1.0,
     ) -> None:
+        lo, hi = THRUST_SCALE_RANGE
+        if not (math.isfinite(thrust_scale) and lo <= thrust_scale <= hi):
+            raise ValueError(f"thrust_scale must be in [{lo:g}, {hi:g}], got {thrust_scale!r}")
         for value, top, unit in zip(nav_sigma, MAX_NAV_SIGMA, ("m", "m/s"), strict=True):
             if not (math.isfinite(value) and 0.0 <= value <= top):
                 raise ValueError(f"navigation noise must be in [0, {top:g}] {unit}, got {value!r}")
@@ -224,6 +229,9 @@ class Simulator:
         """actuation delay: the plant flies the command of this many steps earlier (a FIFO
         filled with zero thrust at reset, as `pd_core.dispersions`' `delay_steps`)"""
         self._fifo: deque[tuple[float, float, float]] = deque()
+        self.thrust_scale = float(thrust_scale)
+        """delivered / commanded thrust on every thruster (an engine out of spec, as a fixed
+        `pd_core.dispersions` thrust error); the fuel flow follows the delivered thrust"""
         self.nav_sigma = np.array([nav_sigma[0]] * 3 + [nav_sigma[1]] * 3 + [0.0])
         """white noise (sd per axis, drawn each step) on the state published: position, velocity,
         none on the mass (as pd_core.dispersions' nav_* dispersions)"""
@@ -351,6 +359,8 @@ class Simulator:
         if self.delay_steps:
             self._fifo.append(thrust)
             thrust = self._fifo.popleft()
+        if self.thrust_scale != 1.0:
+            thrust = tuple(self.thrust_scale * v for v in thrust)
         _, _, terminated, truncated, info = self.env.step_thrust(thrust)
         self._draw_nav_noise()
         self.counters.steps += 1

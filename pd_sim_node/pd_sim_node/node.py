@@ -36,6 +36,7 @@ from pd_core.sim import (
     MAX_NAV_SIGMA,
     MAX_SIM_DELAY_STEPS,
     MISSING_COMMAND_MODES,
+    THRUST_SCALE_RANGE,
     FixedRateTicker,
     Simulator,
     percentiles_ms,
@@ -129,6 +130,11 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         0.0,
         "As nav_position_sigma_m, on the published velocity (m/s). 0 = none.",
     ),
+    "thrust_scale": (
+        1.0,
+        "Engine out of spec, for thrust-error tests: every thruster delivers this fraction of "
+        "the commanded thrust (0.85 = 15 % short), as a fixed pd-eval thrust_error. 1 = none.",
+    ),
     "command_source": (
         "",
         "Name of the one node whose thrust commands fly (e.g. pd_policy_node): commands from "
@@ -155,6 +161,11 @@ CHECKS: dict[str, params.Check] = {
     ),
     "nav_velocity_sigma_mps": lambda v: (
         None if 0.0 <= v <= MAX_NAV_SIGMA[1] else f"must be in [0, {MAX_NAV_SIGMA[1]:g}]"
+    ),
+    "thrust_scale": lambda v: (
+        None
+        if THRUST_SCALE_RANGE[0] <= v <= THRUST_SCALE_RANGE[1]
+        else f"must be in [{THRUST_SCALE_RANGE[0]:g}, {THRUST_SCALE_RANGE[1]:g}]"
     ),
     "command_source": lambda v: (
         None
@@ -188,6 +199,7 @@ class SimNode(Node):
             command_source=p["command_source"],
             delay_steps=p["delay_steps"],
             nav_sigma=(p["nav_position_sigma_m"], p["nav_velocity_sigma_mps"]),
+            thrust_scale=p["thrust_scale"],
         )
         self._restart_due = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command

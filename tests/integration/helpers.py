@@ -69,14 +69,17 @@ def table3_state(seed: int) -> np.ndarray:
     return rng.uniform(TABLE3.lo, TABLE3.hi)
 
 
-def fly_shipped_policy_offline(sim, seed: int):
+def fly_shipped_policy_offline(sim, seed: int, adapt=None):
     """(final true state, policy) of one episode of pd_core's `Simulator` `sim` flown in-process
-    by the shipped policy deciding online on the published (observed) state, as the node does."""
+    by the shipped policy (passed through `adapt`, if given) deciding online on the published
+    (observed) state, as the node does."""
     from pd_core.policy import load_policy
     from pd_core.sim import Command
     from pd_policy_node.node import default_model_path
 
     policy = load_policy(default_model_path())
+    if adapt is not None:
+        policy = adapt(policy)
     episode, _, _ = sim.reset(seed=seed)
     policy.begin_episodes(1)
     while True:

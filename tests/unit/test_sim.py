@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.env import PoweredDescentEnv, Status
 from pd_core.sim import (
     Command,
@@ -273,6 +274,27 @@ def test_navigation_noise_is_white_on_position_and_velocity_and_repeats_with_the
     for bad in ((-1.0, 0.0), (0.0, float("nan")), (51.0, 0.0)):
         with pytest.raises(ValueError, match="navigation noise must be in"):
             Simulator(nav_sigma=bad)
+
+
+def test_an_engine_out_of_spec_delivers_that_fraction_of_every_command():
+    """thrust_scale 0.85: one step of full thrust on every axis changes the velocity by 0.85 of
+    what the nominal engine gives (the thrust over the mean mass of the step, no disturbance),
+    and burns 0.85 of its fuel; out-of-range scales are refused in one line."""
+    full = int(DEFAULT_ACTIONS.levels_to_action(np.array([6, 6, 2])))
+    dv, fuel = {}, {}
+    for scale in (1.0, 0.85):
+        sim = Simulator(disturbance=False, thrust_scale=scale)
+        ep, s0, _ = sim.reset(initial_state=[0.0, 0.0, 1500.0, 0.0, 0.0, -50.0, 2000.0])
+        sim.submit(cmd(ep, 0, full))
+        out = sim.advance()
+        assert out.thrust_n == pytest.approx(tuple(scale * DEFAULT_ACTIONS.table_n[full]))
+        dv[scale] = sim.state[3:6] - s0[3:6] - GRAVITY_MPS2 * DT_S
+        fuel[scale] = s0[6] - sim.state[6]
+    np.testing.assert_allclose(dv[0.85], 0.85 * dv[1.0], rtol=2e-3)
+    assert fuel[0.85] == pytest.approx(0.85 * fuel[1.0], rel=1e-9)
+    for bad in (0.4, 1.6, float("nan")):
+        with pytest.raises(ValueError, match="thrust_scale must be in"):
+            Simulator(thrust_scale=bad)
 
 
 def test_free_fall_crashes_with_reason_and_stops():
