@@ -35,6 +35,6 @@ class NetActor(CompensatesLatency):
         greedy = q.argmax(dim=1).numpy()
         if self.shield is None:
             return greedy
-        return shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield, vertical_thrust_scale)[
-            0
-        ]
+        scale = vertical_thrust_scale
+        shielded, _ = shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield, scale)
+        return shielded
