@@ -26,6 +26,16 @@ of two steps of delay, predicting on the nominal plant left the shipped policy a
 60000000; 98.4 % at 70000000) and the identified plant 100.0 % (99.8 %); with 3 m / 0.3 m/s of
 navigation noise, 99.0 % against 99.2 % (98.4 % against 98.6 %); 500 episodes each.
 
+The braking shield counts on the vertical entry of that matrix where it shows the engine short
+(`vertical_thrust_scale`: the estimate plus three standard deviations). Under metre-class
+navigation noise the per-step estimate sharpens slowly: the noise enters every step's velocity
+change, and consecutive errors cancel, but the filter counts them as independent. So the
+vertical gain is also measured over 1 s windows (the whole velocity change against the
+commanded one, the lateral commands' identified upward part removed), where the noise enters
+once; the shield takes the lower of the two bounds. With 12 % thrust errors and 3 m / 0.3 m/s
+of noise, the shipped policy landed 95.2 % on the per-step bound alone and 98.2 % with both
+(`data/shortfall.yaml`, 500 episodes, seed 99000000).
+
 Where the navigation is noisy the prediction starts from the navigation filter's estimate
 (`pd_core.navfilter`, fed with the command this lag and matrix say the plant flew) instead of the
 observed state; the lag is still identified on the observed velocities.
@@ -69,6 +79,19 @@ SHORTFALL_SD = 3.0
 """standard deviations of its estimate added to the identified vertical gain before the braking
 shield counts on it (`vertical_thrust_scale`): a shortfall it acts on is one the measurements
 show, not the estimate's noise on an engine that delivers what it should"""
+WINDOW_STEPS = 5
+"""steps (1 s) over which the vertical gain is also measured from the whole velocity change:
+navigation noise enters a window's change once, however long the window, where the per-step
+filter sees it in every step's change (consecutive errors cancel, but it counts them as
+independent), so under metre-class noise the window measure is the sharper one"""
+WINDOW_FORGET = 0.9
+"""weight of a window one window older (a memory of about 10 s)"""
+WINDOW_NOISE_MPS = 0.5
+"""prior spread of one window's velocity-change residual (worth two windows): 0.3 m/s of velocity
+noise twice, plus gusts"""
+WINDOW_MIN_EVIDENCE = 25.0
+"""(m/s)^2 of commanded vertical velocity change (summed squares over windows) below which the
+window measure is not used: about one second of full vertical thrust"""
 JUMP_M = 50.0
 """a row whose observed position is this far from where its last observation was heading
 starts a new episode (a reset of the simulator): its memory is cleared"""
@@ -120,6 +143,20 @@ def update_thrust_matrix(
     return gain + err[..., :, None] * k[..., None, :], cov - k[..., :, None] * pu[..., None, :]
 
 
+def window_gain_bound(
+    sxx: np.ndarray, sxy: np.ndarray, syy: np.ndarray, n: np.ndarray, n_sd: float
+) -> np.ndarray:
+    """Upper bound (estimate + n_sd standard deviations) of the vertical gain from the windows'
+    forgetting sums: sxx of the commanded velocity change squared, sxy of it times the observed
+    one, syy of the squared residuals, n of the windows ((m/s)^2, (m/s)^2, (m/s)^2, count);
+    infinite where there is less evidence than WINDOW_MIN_EVIDENCE."""
+    enough = sxx >= WINDOW_MIN_EVIDENCE
+    safe = np.where(enough, sxx, 1.0)
+    noise_var = (syy + 2.0 * WINDOW_NOISE_MPS**2) / (n + 2.0)
+    bound = sxy / safe + n_sd * np.sqrt(noise_var / safe)
+    return np.where(enough, bound, np.inf)
+
+
 class LatencyCompensator(RowMemory):
     """Per-row memory of the commands issued and the lag scores; see the module docstring."""
 
@@ -163,6 +200,11 @@ class LatencyCompensator(RowMemory):
             "_cov": np.tile(_COV0, (n_rows, lags, 1, 1)),
             # running mean square of each lag's force residual per axis (N^2)
             "force_noise_var": np.full((n_rows, lags), FORCE_NOISE_N**2),
+            # the window in progress: commanded and observed vertical velocity change (m/s)
+            "_win": np.zeros((n_rows, 2)),
+            "_win_steps": np.zeros(n_rows, dtype=np.int64),
+            # forgetting sums over finished windows: sxx, sxy, syy (residual^2), count
+            "_win_sums": np.zeros((n_rows, 4)),
         }
 
     def grow(self, n_rows: int) -> None:
@@ -221,7 +263,9 @@ class LatencyCompensator(RowMemory):
             return np.ones(len(rows))
         lag = self.delay_steps[rows]
         sd = np.sqrt(np.maximum(self._cov[rows, lag, 2, 2], 0.0))
-        return self.gain[rows, lag, 2, 2] + n_sd * sd
+        per_step = self.gain[rows, lag, 2, 2] + n_sd * sd
+        sums = self._win_sums[rows]
+        return np.minimum(per_step, window_gain_bound(*sums.T, n_sd))
 
     def describe(self, row: int = 0) -> str:
         """One phrase on what row's memory decided (the policy node's statistics line)."""
@@ -269,6 +313,34 @@ class LatencyCompensator(RowMemory):
         k = np.arange(len(r))
         switch = score[k, best] < score[k, now] - self.margin
         self.delay_steps[r] = np.where(switch, best, now)
+        if self.thrust_model:
+            self._observe_window(r, dv_mps[:, 2], mass_kg)
+
+    def _observe_window(self, r: np.ndarray, dvz_mps: np.ndarray, mass_kg: np.ndarray) -> None:
+        """Add the last step to rows r's window: the vertical velocity change the lag's vertical
+        command gives at nominal thrust, and the one observed less gravity and less what its
+        lateral commands give upwards through the identified matrix (misalignment); a full
+        window goes into the forgetting sums (`window_gain_bound`)."""
+        lag = self.delay_steps[r]
+        cmd = self._issued[r, lag]
+        sideways = np.einsum("bj,bj->b", self.gain[r, lag, 2, 0:2], cmd[:, 0:2])
+        commanded = cmd[:, 2] / mass_kg * DT_S
+        observed = dvz_mps - (GRAVITY_MPS2[2] + sideways / mass_kg) * DT_S
+        self._win[r] += np.stack([commanded, observed], axis=1)
+        self._win_steps[r] += 1
+        done = r[self._win_steps[r] >= WINDOW_STEPS]
+        if not len(done):
+            return
+        x, y = self._win[done].T
+        sums = WINDOW_FORGET * self._win_sums[done]
+        sums[:, 0] += x * x
+        sums[:, 1] += x * y
+        gain = np.where(sums[:, 0] > 0.0, sums[:, 1] / np.maximum(sums[:, 0], 1e-12), 1.0)
+        sums[:, 2] += (y - gain * x) ** 2
+        sums[:, 3] += 1.0
+        self._win_sums[done] = sums
+        self._win[done] = 0.0
+        self._win_steps[done] = 0
 
     def record(self, rows: np.ndarray, thrust_n: np.ndarray) -> None:
         """The commands (B, 3), N, just issued for rows (B,)."""
