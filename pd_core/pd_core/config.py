@@ -142,6 +142,9 @@ GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_co
 # slower than the land speed fall freely (pd_core.shield: the hover trap of light landers)
 GUARD_CLIMB_MPS2 = 1.0
 HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
+# ours: below this (observed) mass the teacher flies: lighter than the student was trained to land
+# (its lightest training starts, 1600 kg, touch down at about 1300-1350 kg; pd_core.shield)
+HANDOVER_MASS_KG = 1350.0
 MAX_DELAY_STEPS = 8  # ours: longest actuation delay (1.6 s) identified in flight (pd_core.latency)
 
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
