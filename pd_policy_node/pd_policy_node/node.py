@@ -62,10 +62,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "file",
         "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
         "than it can still brake, no free fall below 10 m, the teacher above 5 m where its "
-        "lateral limit binds, touchdowns judged by their speed, braking counted on the thrust "
-        "measured in flight where it is short; decisions on the state the "
-        "command will meet, under an actuation delay of up to 8 steps identified in flight, "
-        "filtered where the navigation is noisy): 'file' as the policy file's "
+        "lateral limit binds and below 1350 kg, touchdowns judged by their speed, braking "
+        "counted on the thrust measured in flight where it is short; decisions on the state "
+        "the command will meet, under an actuation delay of up to 8 steps identified in "
+        "flight, filtered where the navigation is noisy): 'file' as the policy file's "
         "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
