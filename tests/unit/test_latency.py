@@ -51,20 +51,27 @@ def test_the_prediction_is_where_the_delayed_plant_takes_the_lander(thrust_model
         np.testing.assert_allclose(predicted[t], true[t + 2], rtol=0, atol=atol)
 
 
+def _identify(d: Dispersions, seed: int, comp: LatencyCompensator, steps: int, choose):
+    """The env after 8 landers of dispersions `d` (env seed `seed`) flew `steps` steps of the
+    actions `choose()` (8,) returns, with `comp` fed their observations and commands."""
+    env = make_vector_env(8, autoreset=False, dispersions=d)
+    _, info = env.reset(seed=seed)
+    rows = np.arange(8)
+    for _ in range(steps):
+        comp.predict(info["observed_state"], rows)
+        a = choose()
+        comp.record(rows, DEFAULT_ACTIONS.table_n[a])
+        _, _, _, _, info = env.step(a)
+    return env
+
+
 def test_the_thrust_matrix_is_identified():
     """A 10 % thrust error on every thruster and a 4 deg misalignment, one step of delay, the
     disturbance on: the lag's thrust matrix ends within 0.01 of the plant's in every entry."""
     d = Dispersions("tm", delay_steps=1, thrust_error=0.1, misalignment_deg=4.0)
-    env = make_vector_env(8, autoreset=False, dispersions=d)
-    _, info = env.reset(seed=9_500_000)
     comp = LatencyCompensator(4)
     rng = np.random.default_rng(1)
-    rows = np.arange(8)
-    for _ in range(60):
-        comp.predict(info["observed_state"], rows)
-        a = rng.integers(0, DEFAULT_ACTIONS.n, 8)
-        comp.record(rows, DEFAULT_ACTIONS.table_n[a])
-        _, _, _, _, info = env.step(a)
+    env = _identify(d, 9_500_000, comp, 60, lambda: rng.integers(0, DEFAULT_ACTIONS.n, 8))
     plant = env._disp.rotation * env._disp.thrust_gain[:, None, :]  # rotation @ diag(gain)
     np.testing.assert_array_equal(comp.delay_steps, 1)
     np.testing.assert_allclose(comp.gain[:, 1], plant, rtol=0, atol=0.01)
@@ -75,16 +82,10 @@ def test_the_vertical_thrust_scale_is_the_identified_vertical_gain():
     measured vertical fraction is within 0.01 of what its plant delivers upwards (gain times the
     misalignment's cosine); 1 for a compensator that identifies nothing."""
     d = Dispersions("short", thrust_error=0.12, misalignment_deg=2.0)
-    env = make_vector_env(8, autoreset=False, dispersions=d)
-    _, info = env.reset(seed=9_600_000)
     comp = LatencyCompensator(2)
     rng = np.random.default_rng(2)
+    env = _identify(d, 9_600_000, comp, 60, lambda: rng.integers(0, DEFAULT_ACTIONS.n, 8))
     rows = np.arange(8)
-    for _ in range(60):
-        comp.predict(info["observed_state"], rows)
-        a = rng.integers(0, DEFAULT_ACTIONS.n, 8)
-        comp.record(rows, DEFAULT_ACTIONS.table_n[a])
-        _, _, _, _, info = env.step(a)
     plant = env._disp.rotation[:, 2, 2] * env._disp.thrust_gain[:, 2]
     assert plant.min() < 0.93  # the draw does hold real shortfalls
     np.testing.assert_allclose(comp.gain[rows, comp.delay_steps, 2, 2], plant, rtol=0, atol=0.01)
@@ -100,15 +101,10 @@ def test_under_navigation_noise_the_window_measure_bounds_the_shortfall_sooner()
     noise enters every step's velocity change, and a window's change only once)."""
     d = Dispersions("short-noisy", thrust_error=0.12, nav_position_sigma_m=3.0,
                     nav_velocity_sigma_mps=0.3)  # fmt: skip
-    env = make_vector_env(8, autoreset=False, dispersions=d)
-    _, info = env.reset(seed=9_600_000)
     comp = LatencyCompensator(8)
-    rows = np.arange(8)
     brake = np.full(8, DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 2])))
-    for _ in range(31):
-        comp.predict(info["observed_state"], rows)
-        comp.record(rows, DEFAULT_ACTIONS.table_n[brake])
-        _, _, _, _, info = env.step(brake)
+    env = _identify(d, 9_600_000, comp, 31, lambda: brake)
+    rows = np.arange(8)
     plant = env._disp.thrust_gain[:, 2]
     bound = comp.vertical_thrust_scale(rows)
     assert np.all(bound >= plant) and np.all(bound <= plant + 0.1), bound - plant
