@@ -6,7 +6,10 @@ Issue 10 asks for nominal fuel <= 1.05x the fuel-optimal landing; the student co
 teacher's braking profile, so a leaner student needs a leaner teacher. Each variant below is the
 `zemzev-vernier` teacher with its braking margin, braking cap or final approach changed, behind
 the shield with the same margin (`shield:controller:...`, with the latency compensation, the
-navigation filter and the measured thrust). Printed per variant: the median fuel over the
+navigation filter and the measured thrust). The last two size the reserve from what that layer
+has measured (`pd_core.reserve`): the lean profile where it shows a nominal lander, the
+baseline elsewhere; and the lean law everywhere with only the shield's margin adapting (what a
+student that cannot see the measurements would fly). Printed per variant: the median fuel over the
 fuel-optimal landing (`pd_core.ocp`, RL thrust limits) from the first `--states` nominal Table 3
 states, and the mean success of every judged campaign (the seeds of the README tables,
 `--episodes` per scenario; 1000 and 500 there). A variant is a teacher worth training from only
@@ -19,7 +22,9 @@ import argparse
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -31,6 +36,7 @@ from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.controllers import VERNIER_PARAMS, ZemZevController  # noqa: E402
 from pd_core.dispersions import load_scenarios  # noqa: E402
 from pd_core.evaluate import rollout  # noqa: E402
+from pd_core.reserve import ReserveAdaptiveTeacher  # noqa: E402
 from pd_core.shield import ShieldedActor, ShieldParams  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -43,11 +49,13 @@ CAMPAIGNS = (  # (label, campaign, seed): the seeds of the README tables
     ("shortfall", str(DATA / "shortfall.yaml"), 99_000_000),
 )
 LEAN = {"brake_accel_mps2": math.inf, "brake_margin": 0.95}  # brake on 95 % of the capability
-VARIANTS = {  # name: (teacher changes, shield changes)
+LEAN98 = {"brake_accel_mps2": math.inf, "brake_margin": 0.98, "final_slope_per_s": 0.6}
+FIXED = {  # name: (teacher changes, shield changes)
     "baseline (zemzev-vernier)": ({}, {}),
     "brake on 95 %": (LEAN, {"thrust_margin": 0.95}),
     "95 %, final slope 0.6/s": ({**LEAN, "final_slope_per_s": 0.6}, {"thrust_margin": 0.95}),
     "95 %, final slope 0.7/s": ({**LEAN, "final_slope_per_s": 0.7}, {"thrust_margin": 0.95}),
+    "98 %, final slope 0.6/s": (LEAN98, {"thrust_margin": 0.98}),
 }
 
 
@@ -55,6 +63,14 @@ def actor(teacher: dict, shield: dict) -> ShieldedActor:
     return ShieldedActor(
         ZemZevController(replace(VERNIER_PARAMS, **teacher)), ShieldParams(**shield)
     )
+
+
+VARIANTS: dict[str, Callable[[], ShieldedActor]] = {
+    **{name: partial(actor, *changes) for name, changes in FIXED.items()},
+    # the reserve sized from the runtime layer's measurements (pd_core.reserve)
+    "98 %/0.6 where measured nominal": ReserveAdaptiveTeacher,
+    "98 %/0.6 law, adaptive shield": partial(ReserveAdaptiveTeacher, lean_everywhere=True),
+}
 
 
 def main() -> None:
@@ -71,16 +87,16 @@ def main() -> None:
     print(
         f"fuel-optimal landings of {args.states} nominal states: median {np.median(optimum):.1f} kg"
     )
-    head = f"{'teacher + shield':<28}{'fuel ratio':>11}" + "".join(
+    head = f"{'teacher + shield':<34}{'fuel ratio':>11}" + "".join(
         f"{c:>12}" for c, _, _ in CAMPAIGNS
     )
     print(head + "\n" + "-" * len(head))
-    for name, (teacher, shield) in VARIANTS.items():
-        ro = rollout(actor(teacher, shield), args.states, args.seed)
-        row = f"{name:<28}{np.median(ro.fuel_kg / optimum):>11.3f}"
+    for name, make in VARIANTS.items():
+        ro = rollout(make(), args.states, args.seed)
+        row = f"{name:<34}{np.median(ro.fuel_kg / optimum):>11.3f}"
         for _, campaign, seed in CAMPAIGNS:
             rates = [
-                rollout(actor(teacher, shield), args.episodes, seed, dispersions=d).landed.mean()
+                rollout(make(), args.episodes, seed, dispersions=d).landed.mean()
                 for d in load_scenarios(campaign)
             ]
             row += f"{100 * np.mean(rates):>12.2f}"

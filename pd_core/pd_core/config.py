@@ -134,6 +134,10 @@ STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 # --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
 
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
+# ours: the lean profile, flown where the runtime layer has measured a nominal lander
+# (pd_core.reserve): braking on 98 % of the capability, final slope 0.6/s (bench/fuel_front.py)
+LEAN_BRAKE_MARGIN = 0.98
+LEAN_FINAL_SLOPE_PER_S = 0.6
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
 # ours: the braking shield lets a lander touch down this fast (half of Eq. 12's 2 m/s)
 TOUCHDOWN_SPEED_MPS = 1.0

@@ -55,6 +55,7 @@ import numpy as np
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.dynamics import step
+from pd_core.navfilter import WARM_STEPS as NAV_WARM_STEPS
 from pd_core.navfilter import NavFilter
 from pd_core.rowmemory import RowMemory
 
@@ -266,6 +267,27 @@ class LatencyCompensator(RowMemory):
         per_step = self.gain[rows, lag, 2, 2] + n_sd * sd
         sums = self._win_sums[rows]
         return np.minimum(per_step, window_gain_bound(*sums.T, n_sd))
+
+    def evidence(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """What the memory of rows (B,) has measured, each (B,): the lag flown (`delay_steps`),
+        its identified vertical gain and that gain's standard deviation (`gain`, `gain_sd`), the
+        r.m.s. force residual per axis (`force_sd_n`, N: gusts and what the model lacks), and
+        whether the navigation filter has found noise or is still warming up (`nav_noisy`)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        self.grow(int(rows.max()) + 1 if len(rows) else 0)
+        lag = self.delay_steps[rows]
+        nav = (
+            np.zeros(len(rows), dtype=bool)
+            if self.nav is None
+            else self.nav.engaged[rows] | (self.nav.steps(rows) < NAV_WARM_STEPS)
+        )
+        return {
+            "delay_steps": lag,
+            "gain": self.gain[rows, lag, 2, 2],
+            "gain_sd": np.sqrt(np.maximum(self._cov[rows, lag, 2, 2], 0.0)),
+            "force_sd_n": np.sqrt(self.force_noise_var[rows, lag]),
+            "nav_noisy": nav,
+        }
 
     def describe(self, row: int = 0) -> str:
         """One phrase on what row's memory decided (the policy node's statistics line)."""

@@ -99,6 +99,10 @@ class NavFilter(RowMemory):
             "engaged": np.zeros(n_rows, dtype=bool),
         }
 
+    def steps(self, rows: np.ndarray) -> np.ndarray:
+        """(B,) observations of rows (B,) the noise estimate has learnt from."""
+        return self._steps[np.asarray(rows, dtype=np.int64)]
+
     def estimate(
         self, observed: np.ndarray, rows: np.ndarray, accel_mps2: np.ndarray
     ) -> np.ndarray:
