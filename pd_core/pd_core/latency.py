@@ -262,11 +262,15 @@ class LatencyCompensator(RowMemory):
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
         if self.max_delay_steps == 0 or not self.thrust_model:
             return np.ones(len(rows))
+        _, gain, sd = self._vertical_gain(rows)
+        sums = self._win_sums[rows]
+        return np.minimum(gain + n_sd * sd, window_gain_bound(*sums.T, n_sd))
+
+    def _vertical_gain(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lag, identified vertical gain, its standard deviation), each (B,), of rows (B,)."""
         lag = self.delay_steps[rows]
         sd = np.sqrt(np.maximum(self._cov[rows, lag, 2, 2], 0.0))
-        per_step = self.gain[rows, lag, 2, 2] + n_sd * sd
-        sums = self._win_sums[rows]
-        return np.minimum(per_step, window_gain_bound(*sums.T, n_sd))
+        return lag, self.gain[rows, lag, 2, 2], sd
 
     def evidence(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """What the memory of rows (B,) has measured, each (B,): the lag flown (`delay_steps`),
@@ -275,7 +279,7 @@ class LatencyCompensator(RowMemory):
         whether the navigation filter has found noise or is still warming up (`nav_noisy`)."""
         rows = np.asarray(rows, dtype=np.int64)
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
-        lag = self.delay_steps[rows]
+        lag, gain, sd = self._vertical_gain(rows)
         nav = (
             np.zeros(len(rows), dtype=bool)
             if self.nav is None
@@ -283,8 +287,8 @@ class LatencyCompensator(RowMemory):
         )
         return {
             "delay_steps": lag,
-            "gain": self.gain[rows, lag, 2, 2],
-            "gain_sd": np.sqrt(np.maximum(self._cov[rows, lag, 2, 2], 0.0)),
+            "gain": gain,
+            "gain_sd": sd,
             "force_sd_n": np.sqrt(self.force_noise_var[rows, lag]),
             "nav_noisy": nav,
         }

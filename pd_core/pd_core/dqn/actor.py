@@ -35,6 +35,7 @@ class NetActor(CompensatesLatency):
         greedy = q.argmax(dim=1).numpy()
         if self.shield is None:
             return greedy
-        scale = vertical_thrust_scale
-        shielded, _ = shield_actions(greedy, states, DEFAULT_ACTIONS, self.shield, scale)
+        shielded, _ = shield_actions(
+            greedy, states, DEFAULT_ACTIONS, self.shield, vertical_thrust_scale
+        )
         return shielded
