@@ -2,7 +2,8 @@
 # The 60 min training recipe of models/pd_dqn_robust.md, one seed, three pd-train stages:
 #   1. `best` preset from scratch (20 min);
 #   2. fine-tune under the `broad` dispersions from the zemzev-vernier teacher, behind the
-#      braking shield, with the landing bonus (25 min, demonstrations included);
+#      braking shield, with the landing bonus and the near-pad inputs (25 min, demonstrations
+#      included; stage 1's paper network is widened with zero weights on them);
 #   3. the same again from stage 2's best.pt (11 min). The recipe's policy is stage 3's final.pt.
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
@@ -11,12 +12,15 @@ set -euo pipefail
 
 usage() {
     cat <<'EOF'
-usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--dry-run] [-h]
+usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
+                              [--dry-run] [-h]
 
   --seed S         training seed of every stage (default 1)
   --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
   --stage1 FILE    skip stage 1 and start stage 2 from this policy (e.g. models/pd_dqn_best.pt,
                    a 20 min snapshot of stage 1 with seed 1)
+  --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
+                   as it was before them, Eq. 21's 7 inputs only
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 Each stage uses one torch thread, so two seeds can train side by side on two cores. The
@@ -29,12 +33,14 @@ seed=1
 out=""
 stage1=""
 dry=0
+near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
     case "$1" in
         -h | --help) usage; exit 0 ;;
         --seed) seed="${2:?--seed needs a value}"; shift 2 ;;
         --out) out="${2:?--out needs a directory}"; shift 2 ;;
         --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
+        --paper-inputs) near_pad=(); shift ;;
         --dry-run) dry=1; shift ;;
         *) echo "train_recipe.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
@@ -44,7 +50,7 @@ done
 out="${out:-runs/recipe__$seed}"
 
 FINE_TUNE=(--preset robust --controller zemzev-vernier --precision-bonus 10
-    --recovery-failed-share 0.5 --shield --dispersions broad)
+    --recovery-failed-share 0.5 --shield --dispersions broad "${near_pad[@]}")
 start=$SECONDS
 
 stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished

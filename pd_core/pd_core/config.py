@@ -130,6 +130,11 @@ TABLE3 = StateRange(  # RL training and testing, Table 3
 # --- State scaling (Eqs. 20-21) ---------------------------------------------------------------
 
 STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
+# ours: length scales (m, m, m, m/s, m/s, m/s) of the near-pad inputs a network may add to Eq. 21
+# (pd_core.state.near_pad_features): at Eq. 21's 0.01/m a 0.5 m miss moves the input by 0.005, and
+# the student disagreed with its teacher on 41 % of the lateral choices of the last 5 m
+# (models/pd_dqn_robust.md, "Near-pad inputs")
+NEAR_PAD_SCALE = np.array([2.0, 2.0, 10.0, 0.5, 0.5, 2.0])
 
 # --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
 

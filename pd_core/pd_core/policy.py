@@ -21,7 +21,7 @@ from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, N_ACTIONS_PER_AXIS, RL_THRUST, STATE_SCALE, ThrustLimits
 from pd_core.latency import CompensatesLatency
 from pd_core.shield import ShieldParams, latency_for, shield_actions
-from pd_core.state import check_state
+from pd_core.state import check_state, near_pad_features
 
 FORMAT_VERSION = 1
 SHIELD_MODES = ("file", "always", "never")
@@ -120,6 +120,7 @@ class Policy(CompensatesLatency):
             if hasattr(m, "weight")
         ]
         self._act_fn = np.tanh if metadata["network"]["activation"] == "tanh" else _relu
+        self._near_pad = bool(metadata["network"].get("near_pad", False))
         self.shield = shield
         self.shield_fired = 0
         """steps on which the shield overrode the network (counted since loading)"""
@@ -128,6 +129,8 @@ class Policy(CompensatesLatency):
     def q_values(self, state: np.ndarray) -> np.ndarray:
         """Action values (..., n_actions) of physical states (..., 7); ValueError if invalid."""
         h = check_state(state) * self._scale
+        if self._near_pad:
+            h = np.concatenate([h, near_pad_features(h)], axis=-1)
         for i, (w, b) in enumerate(self._layers):
             h = h @ w + b
             if i < len(self._layers) - 1:
@@ -245,6 +248,7 @@ def load_policy(path: str | Path, shield: str = "file") -> Policy:
             int(shape["n_actions"]),
             tuple(shape["hidden"]),
             shape["activation"],
+            near_pad=bool(shape.get("near_pad", False)),
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise PolicyLoadError(f"{js}: bad network description: {exc}") from exc

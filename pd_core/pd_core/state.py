@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pd_core.config import STATE_SCALE
+from pd_core.config import NEAR_PAD_SCALE, STATE_SCALE
 
 # Plausibility bounds for states coming from outside (nodes, files, users): far beyond anything
 # the lander flies, tight enough to catch unit mix-ups and garbage.
@@ -16,6 +16,17 @@ MAX_MASS_KG = 1e6
 def scale_state(state: np.ndarray) -> np.ndarray:
     """Network input of Eq. 20: [x, v, m] * s_scale (Eq. 21), float32."""
     return (np.asarray(state, dtype=float) * STATE_SCALE).astype(np.float32)
+
+
+# gains on the Eq. 21-scaled position and velocity that give tanh(state / NEAR_PAD_SCALE)
+NEAR_PAD_GAIN = 1.0 / (NEAR_PAD_SCALE * STATE_SCALE[:6])
+N_NEAR_PAD = len(NEAR_PAD_SCALE)
+
+
+def near_pad_features(scaled: np.ndarray) -> np.ndarray:
+    """(..., 6) tanh(position / 2, 2, 10 m; velocity / 0.5, 0.5, 2 m/s) from Eq. 21 inputs
+    (..., 7): resolves the last metres, where Eq. 21's 0.01/m cannot, and saturates above."""
+    return np.tanh(np.asarray(scaled)[..., :N_NEAR_PAD] * NEAR_PAD_GAIN)
 
 
 def check_state(state: np.ndarray) -> np.ndarray:

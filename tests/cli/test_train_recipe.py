@@ -43,6 +43,8 @@ def test_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(tmp_pat
         assert cfg["preset"] == "robust" and cfg["controller"] == "zemzev-vernier"
         assert cfg["shield"] is True and cfg["dispersions"] == "broad"
         assert cfg["precision_bonus"] == pytest.approx(10.0)
+        assert cfg["near_pad"] is True
+    assert s1["near_pad"] is False  # stage 1 is the paper's network; stage 2 widens it
     assert s2["init_policy"] == f"{out}/stage1/best.pt"
     assert s3["init_policy"] == f"{out}/stage2/best.pt"
     assert [c["seed"] for c in (s1, s2, s3)] == [7, 7, 7]
@@ -57,6 +59,11 @@ def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
     s2, s3 = stage_configs(capsys, "--stage1", str(start), "--out", str(tmp_path / "r"))
     assert s2["init_policy"] == str(start)
     assert s3["init_policy"] == f"{tmp_path}/r/stage2/best.pt"
+
+
+def test_paper_inputs_fine_tune_without_the_near_pad_inputs(tmp_path, capsys):
+    configs = stage_configs(capsys, "--paper-inputs", "--out", str(tmp_path / "r"))
+    assert [c["near_pad"] for c in configs] == [False, False, False]
 
 
 def test_finished_stages_are_skipped(tmp_path):

@@ -59,7 +59,9 @@ class DQNAgent:
 
     def __init__(self, cfg: TrainConfig, n_inputs: int = 7, n_actions: int = 147) -> None:
         self.cfg = cfg
-        self.q = QNetwork(n_inputs, n_actions, tuple(cfg.hidden), cfg.activation)
+        self.q = QNetwork(
+            n_inputs, n_actions, tuple(cfg.hidden), cfg.activation, near_pad=cfg.near_pad
+        )
         self.q_target = copy.deepcopy(self.q)
         for p in self.q_target.parameters():
             p.requires_grad_(False)
@@ -75,7 +77,7 @@ class DQNAgent:
 
     def init_input_normalisation(self, obs: np.ndarray) -> None:
         """First layer W x + b -> W (x - mu) / sigma + b, for both networks (same shape)."""
-        x = torch.as_tensor(obs, dtype=torch.float32)
+        x = self.q.inputs(torch.as_tensor(obs, dtype=torch.float32))
         mu, sigma = x.mean(0), x.std(0).clamp_min(1e-3)
         first = self.q.net[0]
         with torch.no_grad():

@@ -40,6 +40,10 @@ class TrainConfig:
     """hidden units of the Q-network (Table 2)"""
     activation: str = "tanh"
     """activation of the hidden layers: tanh (paper) or relu"""
+    near_pad: bool = False
+    """ours: the first layer also sees tanh(position / 2, 2, 10 m; velocity / 0.5, 0.5, 2 m/s)
+    (pd_core.state.near_pad_features), which resolve the last metres; a paper network given as
+    init_policy is widened with zero weights on them"""
     input_norm_init: bool = False
     """fold a standardisation of the scaled inputs (mean/std of visited states) into the first
     layer's initial weights; same architecture, better-conditioned start"""

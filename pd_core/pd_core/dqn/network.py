@@ -5,11 +5,17 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from pd_core.state import N_NEAR_PAD, NEAR_PAD_GAIN
+
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 
 
 class QNetwork(nn.Module):
-    """MLP from scaled state (Eq. 20) to action values; (300, 200, 300) tanh in the paper."""
+    """MLP from scaled state (Eq. 20) to action values; (300, 200, 300) tanh in the paper.
+
+    With `near_pad` (ours, off by default) the first layer also sees
+    `pd_core.state.near_pad_features` of its input: a fixed, parameter-free transform, so the
+    observation (Eq. 21) and the replay memories stay 7-wide."""
 
     def __init__(
         self,
@@ -17,12 +23,15 @@ class QNetwork(nn.Module):
         n_actions: int = 147,
         hidden: tuple[int, ...] = (300, 200, 300),
         activation: str = "tanh",
+        near_pad: bool = False,
     ) -> None:
         super().__init__()
         if activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
+        if near_pad and n_inputs < N_NEAR_PAD:
+            raise ValueError(f"near_pad inputs need the 7 state inputs, got n_inputs={n_inputs}")
         layers: list[nn.Module] = []
-        width = n_inputs
+        width = n_inputs + (N_NEAR_PAD if near_pad else 0)
         for h in hidden:
             layers += [nn.Linear(width, h), ACTIVATIONS[activation]()]
             width = h
@@ -32,14 +41,42 @@ class QNetwork(nn.Module):
         self.n_actions = n_actions
         self.hidden = tuple(hidden)
         self.activation = activation
+        self.near_pad = near_pad
+        self.register_buffer(
+            "_near_pad_gain", torch.as_tensor(NEAR_PAD_GAIN, dtype=torch.float32), persistent=False
+        )
+
+    def inputs(self, obs: torch.Tensor) -> torch.Tensor:
+        """What the first layer sees: the scaled state, then its near-pad features if on."""
+        if not self.near_pad:
+            return obs
+        fine = torch.tanh(obs[..., :N_NEAR_PAD] * self._near_pad_gain)
+        return torch.cat([obs, fine], dim=-1)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net(obs)
+        return self.net(self.inputs(obs))
 
     def shape_metadata(self) -> dict:
-        return {
+        out = {
             "n_inputs": self.n_inputs,
             "n_actions": self.n_actions,
             "hidden": list(self.hidden),
             "activation": self.activation,
         }
+        if self.near_pad:  # absent in files without them: their metadata is unchanged
+            out["near_pad"] = True
+        return out
+
+    def widened_from(self, other: QNetwork) -> None:
+        """Copy `other`'s weights; near-pad inputs it lacks start with zero weight, so the
+        values are `other`'s exactly until training moves them (fine-tuning a paper network)."""
+        same = {k: v for k, v in other.shape_metadata().items() if k != "near_pad"}
+        mine = {k: v for k, v in self.shape_metadata().items() if k != "near_pad"}
+        if same != mine or (other.near_pad and not self.near_pad):
+            raise ValueError(f"cannot widen {other.shape_metadata()} to {self.shape_metadata()}")
+        state = other.state_dict()
+        w = state["net.0.weight"]
+        if w.shape[1] < self.net[0].weight.shape[1]:
+            pad = torch.zeros(w.shape[0], self.net[0].weight.shape[1] - w.shape[1])
+            state["net.0.weight"] = torch.cat([w, pad], dim=1)
+        self.load_state_dict(state)

@@ -152,15 +152,16 @@ class Trainer:
         return cls(TrainConfig(**d), run_dir=ckpt.parent, on_eval=on_eval, restore=state)
 
     def _init_from_policy(self, path: str) -> None:
-        """Start both networks from a shipped policy (fine-tuning); ValueError if it differs."""
+        """Start both networks from a shipped policy (fine-tuning; a paper network is widened
+        with near-pad inputs if the config asks for them); ValueError if it differs."""
         net = load_policy(path).network
-        want = self.agent.q.shape_metadata()
-        if net.shape_metadata() != want:
+        try:
+            self.agent.q.widened_from(net)
+        except ValueError:
             raise ValueError(
                 f"init_policy {path}: network {net.shape_metadata()} differs from the config's "
-                f"{want}"
-            )
-        self.agent.q.load_state_dict(net.state_dict())
+                f"{self.agent.q.shape_metadata()}"
+            ) from None
         self.agent.sync_target()
 
     def _normalisation_states(self) -> np.ndarray:
