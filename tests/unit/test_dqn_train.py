@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -136,6 +137,32 @@ def test_init_policy_starts_from_the_shipped_weights_and_refuses_another_shape(t
         assert torch.equal(x, y)
     with pytest.raises(ValueError, match="differs from the config"):
         Trainer(_small(tmp_path, "bad", init_policy=shipped, hidden=(16, 16)), quiet=True)
+
+
+def test_a_paper_network_is_widened_for_near_pad_inputs_without_changing_a_value(tmp_path):
+    src = Trainer(_small(tmp_path, "src", seed=3), quiet=True)
+    src.run()
+    tuned = Trainer(
+        _small(
+            tmp_path, "wide", seed=4, init_policy=str(tmp_path / "src" / "final.pt"), near_pad=True
+        ),
+        quiet=True,
+    )
+    assert tuned.agent.q.net[0].weight.shape == (32, 13)
+    obs = torch.from_numpy(tuned.demo.obs[:500])  # demonstration states, down to the pad
+    with torch.no_grad():
+        want = src.agent.q(obs)
+        torch.testing.assert_close(tuned.agent.q(obs), want, atol=1e-5, rtol=0)
+        torch.testing.assert_close(tuned.agent.q_target(obs), want, atol=1e-5, rtol=0)
+
+
+def test_max_minutes_counts_the_demonstrations_built_at_start(tmp_path):
+    t0 = time.perf_counter()
+    tr = Trainer(_small(tmp_path, "clock", controller_demo_episodes=16), quiet=True)
+    built = time.perf_counter() - t0
+    assert built > 0.2  # the 16 teacher episodes take a measurable time to fly
+    # the run's clock started before them: all but the config check is on it
+    assert tr._now() >= built - 0.05
 
 
 def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path):

@@ -27,7 +27,8 @@ class TrainConfig:
     episodes: int = DQN_PAPER.episodes
     """training stops after this many finished episodes (summed over the batched envs)"""
     max_minutes: float = 0.0
-    """training also stops after this many minutes of wall time (0: no limit)"""
+    """training also stops after this many minutes of wall time, counted from the start of the
+    run: building the demonstrations (and the recovery search) is part of it (0: no limit)"""
     max_updates: int = 0
     """training also stops after this many gradient updates (0: no limit)"""
     num_envs: int = 1

@@ -96,6 +96,7 @@ class Trainer:
         restore: dict[str, Any] | None = None,
     ) -> None:
         check_config(cfg)
+        t_start = time.perf_counter()  # max_minutes counts the demonstrations built below
         self.cfg = cfg
         self.quiet = quiet
         self.on_eval = on_eval
@@ -132,7 +133,7 @@ class Trainer:
         self.last_info: dict[str, float] = {}
         self.pretrained = 0
         self._scenario_log: CsvLog | None = None
-        self._t0 = time.perf_counter()
+        self._t0 = t_start
         if restore is not None:
             self.load_state_dict(restore)
 
