@@ -160,9 +160,9 @@ def test_max_minutes_counts_the_demonstrations_built_at_start(tmp_path):
     t0 = time.perf_counter()
     tr = Trainer(_small(tmp_path, "clock", controller_demo_episodes=16), quiet=True)
     built = time.perf_counter() - t0
-    assert built > 0.2  # the 16 teacher episodes take a measurable time to fly
-    # the run's clock started before them: all but the config check is on it
-    assert tr._now() >= built - 0.05
+    # the run's clock started before them (without that it would read about 0 here)
+    assert built > 0.1
+    assert tr._now() >= 0.8 * built
 
 
 def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path):
