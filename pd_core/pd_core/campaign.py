@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from pd_core.config import REWARD
 from pd_core.controllers import make_controller
 from pd_core.dispersions import Dispersions
 from pd_core.evaluate import (
@@ -48,6 +49,9 @@ METRICS = (
     ("fuel_median_kg", "fuel p50 kg", 1.0, ".1f"),
 )
 REACH_HEAD = ("out of reach", "success % of reachable")
+# Failed episodes listed per cell: in campaign.json, and in the printed table.
+LISTED_FAILURES_JSON = 50
+LISTED_FAILURES_TEXT = 3
 
 
 def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
@@ -150,6 +154,35 @@ def metrics(ro: Rollouts) -> dict[str, float]:
     }
 
 
+def failures(ro: Rollouts, seed: int, limit: int = LISTED_FAILURES_JSON) -> dict[str, Any]:
+    """The cell's failed episodes, enough to replay each (episode i flies on env seed seed + i,
+    so `--episodes 1 --seed <its seed>` flies it again) and to see how it failed: off the pad
+    (Eq. 12's 5 m), too fast (2 m/s) or out of time."""
+    f = ro.final_states
+    miss = np.linalg.norm(f[:, 0:2], axis=1)
+    off = np.linalg.norm(f[:, 0:3], axis=1)  # Eq. 12 measures the 3-D distance
+    speed = np.linalg.norm(f[:, 3:6], axis=1)
+    idx = np.flatnonzero(~ro.landed)
+    listed = []
+    for i in idx[:limit]:
+        why = [] if ro.terminated[i] else ["out of time"]
+        if ro.terminated[i] and off[i] >= REWARD.x_lim_m:
+            why.append("off the pad")
+        if ro.terminated[i] and speed[i] >= REWARD.v_lim_mps:
+            why.append("too fast")
+        listed.append(
+            {
+                "episode": int(i),
+                "seed": seed + int(i),
+                "outcome": ", ".join(why),
+                "miss_m": round(float(miss[i]), 3),
+                "speed_mps": round(float(speed[i]), 3),
+                "k_velocity_mps": round(float(f[i, 5]), 3),
+            }
+        )
+    return {"count": int(idx.size), "listed": listed}
+
+
 def merge(
     shards: list[Shard], results: list[Rollouts], scenarios: list[Dispersions]
 ) -> dict[str, dict[str, Rollouts]]:
@@ -214,6 +247,9 @@ def table(
     """The campaign as JSON-ready data: scenarios, agents and a metrics cell for each pair;
     with `reach`, also `reachability` per scenario and the success over reachable episodes."""
     results = {d.name: {a: metrics(flown[d.name][a]) for a in agents} for d in scenarios}
+    for d in scenarios:
+        for a in agents:
+            results[d.name][a]["failed_episodes"] = failures(flown[d.name][a], seed)
     t = {
         "seed": seed,
         "episodes": episodes,
@@ -282,6 +318,7 @@ def format_table(t: dict[str, Any]) -> str:
     lines.append("")
     for a, v in t["mean_success_rate"].items():
         lines.append(f"mean success over the campaign, {a}: {100 * v:.2f} %")
+    lines += _failure_lines(t)
     if reach is not None:
         for a, v in t["mean_success_rate_reachable"].items():
             rate = "-" if v is None else f"{100 * v:.2f} %"
@@ -294,6 +331,28 @@ def format_table(t: dict[str, Any]) -> str:
                 f"{_some(r['undecided_episodes'])}"
             )
     return "\n".join(lines)
+
+
+def _failure_lines(t: dict[str, Any], n: int = LISTED_FAILURES_TEXT) -> list[str]:
+    """A few failed episodes per cell, each with the seed that flies it again."""
+    lines = []
+    for d in t["scenarios"]:
+        for a in t["agents"]:
+            failed = t["results"][d["name"]][a].get("failed_episodes")
+            if not failed or not failed["count"]:
+                continue
+            shown = "; ".join(
+                f"seed {e['seed']} {e['outcome']} ({e['miss_m']:.2f} m, {e['speed_mps']:.2f} m/s)"
+                for e in failed["listed"][:n]
+            )
+            more = f"; {failed['count'] - n} more in the JSON" if failed["count"] > n else ""
+            lines.append(f"  {d['name']} / {a}: {failed['count']} failed: {shown}{more}")
+    if lines:
+        lines = [
+            "",
+            "failed episodes (fly one again: --dispersions <scenario> --episodes 1 --seed <seed>):",
+        ] + lines
+    return lines
 
 
 def _mean_of_some(values: list[float | None]) -> float | None:
@@ -319,6 +378,7 @@ __all__ = [
     "AgentSpec",
     "Shard",
     "episode_ranges",
+    "failures",
     "fly_shard",
     "format_table",
     "load_actor",

@@ -28,6 +28,28 @@ def test_campaign_table_json_and_png(tmp_path, capsys):
     assert (out / "campaign.png").stat().st_size > 5000
 
 
+def test_failed_episodes_are_listed_and_fly_again_from_their_seed(tmp_path, capsys):
+    argv = ["--controller", "zemzev", "--name", "zz", "--episodes", "40", "--seed", "3"]
+    assert pd_eval.main(argv + ["--dispersions", "all", "--out", str(tmp_path / "c")]) == 0
+    text = capsys.readouterr().out
+    cell = json.loads((tmp_path / "c" / "campaign.json").read_text())["results"]["all"]["zz"]
+    failed = cell["failed_episodes"]
+    assert failed["count"] == round(40 * (1 - cell["success_rate"])) > 0
+    assert len(failed["listed"]) == failed["count"]  # under the listing limit
+    assert f"all / zz: {failed['count']} failed: seed {failed['listed'][0]['seed']}" in text
+    for e in failed["listed"]:
+        assert e["seed"] == 3 + e["episode"]
+        assert e["outcome"] and (
+            e["miss_m"] >= 5.0 or e["speed_mps"] >= 2.0 or "time" in e["outcome"]
+        )
+    e = failed["listed"][0]
+    again = ["--controller", "zemzev", "--name", "zz", "--episodes", "1", "--seed", str(e["seed"])]
+    assert pd_eval.main(again + ["--dispersions", "all", "--out", str(tmp_path / "one")]) == 0
+    capsys.readouterr()
+    one = json.loads((tmp_path / "one" / "campaign.json").read_text())["results"]["all"]["zz"]
+    assert one["failed_episodes"]["listed"] == [{**e, "episode": 0}]
+
+
 def test_campaign_from_yaml_and_refusals(tmp_path, capsys):
     f = tmp_path / "mine.yaml"
     f.write_text("scenarios:\n  - {name: heavy, mass_kg: [2150, 2250]}\n")
