@@ -157,12 +157,18 @@ def test_a_paper_network_is_widened_for_near_pad_inputs_without_changing_a_value
 
 
 def test_max_minutes_counts_the_demonstrations_built_at_start(tmp_path):
+    # a budget far shorter than building 32 teacher episodes: the run stops before any update,
+    # and its wall time includes the building (a clock restarted by `run` would read ~0 here)
     t0 = time.perf_counter()
-    tr = Trainer(_small(tmp_path, "clock", controller_demo_episodes=32), quiet=True)
+    tr = Trainer(
+        _small(tmp_path, "clock", controller_demo_episodes=32, max_minutes=1e-5), quiet=True
+    )
     built = time.perf_counter() - t0
-    # the run's clock started before them (without that it would read about 0 here)
+    out = tr.run()
     assert built > 0.02
-    assert tr._now() >= 0.8 * built
+    assert out["stop_reason"] == "max_minutes"
+    assert tr.pretrained == 0 and out["episodes"] == 0 and out["updates"] == 0
+    assert out["wall_s"] >= 0.8 * built
 
 
 def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path):

@@ -133,6 +133,9 @@ class Trainer:
         self.last_info: dict[str, float] = {}
         self.pretrained = 0
         self._scenario_log: CsvLog | None = None
+        # the set-up counts towards max_minutes: `run` restarts the clock from wall_s (a resumed
+        # run's wall_s comes from its checkpoint instead)
+        self.c.wall_s = time.perf_counter() - t_start
         self._t0 = t_start
         if restore is not None:
             self.load_state_dict(restore)
