@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from pd_core.config import REWARD
 from pd_core.controllers import make_controller
 from pd_core.dispersions import Dispersions
 from pd_core.evaluate import (
@@ -36,6 +35,7 @@ from pd_core.evaluate import (
 )
 from pd_core.policy import load_policy
 from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
+from pd_core.reward import missed_limits
 from pd_core.shield import ShieldedActor, with_settings
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
@@ -160,15 +160,15 @@ def failures(ro: Rollouts, seed: int, limit: int = LISTED_FAILURES_JSON) -> dict
     (Eq. 12's 5 m), too fast (2 m/s) or out of time."""
     f = ro.final_states
     miss = np.linalg.norm(f[:, 0:2], axis=1)
-    off = np.linalg.norm(f[:, 0:3], axis=1)  # Eq. 12 measures the 3-D distance
     speed = np.linalg.norm(f[:, 3:6], axis=1)
+    off, fast = missed_limits(f[:, 0:3], f[:, 3:6])
     idx = np.flatnonzero(~ro.landed)
     listed = []
     for i in idx[:limit]:
         why = [] if ro.terminated[i] else ["out of time"]
-        if ro.terminated[i] and off[i] >= REWARD.x_lim_m:
+        if ro.terminated[i] and off[i]:
             why.append("off the pad")
-        if ro.terminated[i] and speed[i] >= REWARD.v_lim_mps:
+        if ro.terminated[i] and fast[i]:
             why.append("too fast")
         listed.append(
             {

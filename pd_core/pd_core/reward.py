@@ -56,6 +56,14 @@ def landed(
     )
 
 
+def missed_limits(
+    position_m: np.ndarray, velocity_mps: np.ndarray, cfg: RewardConfig = REWARD
+) -> tuple[np.ndarray, np.ndarray]:
+    """(off the pad, too fast): which of Eq. 12's touchdown limits (|x| < 5 m, |v| < 2 m/s) a
+    state misses, so every report of a failed landing gives the same reason."""
+    return _norm(position_m) >= cfg.x_lim_m, _norm(velocity_mps) >= cfg.v_lim_mps
+
+
 def reward(
     position_m: np.ndarray,
     velocity_mps: np.ndarray,

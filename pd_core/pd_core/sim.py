@@ -36,6 +36,7 @@ from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, StateRange
 from pd_core.env import PoweredDescentEnv, Status
 from pd_core.ocp import check_request
+from pd_core.reward import missed_limits
 
 MISSING_COMMAND_MODES = ("hold", "zero")
 MAX_SIM_DELAY_STEPS = 50  # as pd_core.dispersions.Dispersions.delay_steps
@@ -165,10 +166,11 @@ def describe_end(status: Status, state: np.ndarray, time_s: float) -> str:
     if status == Status.LANDED:
         return f"landed: touchdown at |r| = {r:.3f} m, |v| = {v:.3f} m/s {lim}"
     if status == Status.CRASHED:
+        off, fast = missed_limits(pos, vel)
         why = []
-        if r >= REWARD.x_lim_m:
+        if off:
             why.append(f"|r| = {r:.2f} m off target")
-        if v >= REWARD.v_lim_mps:
+        if fast:
             why.append(f"|v| = {v:.2f} m/s too fast")
         return f"crashed: touchdown with {' and '.join(why) or 'no margin'} {lim}"
     if status == Status.OUT_OF_TIME:
