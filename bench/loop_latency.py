@@ -25,10 +25,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 
 from pd_core.sim import Command, Simulator, percentiles_ms
 from pd_interfaces.msg import LanderState, ThrustCommand
@@ -38,6 +34,7 @@ from pd_ros_common.convert import state_msg
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.process import ProcessError, Supervisor
 from pd_ros_common.qos import LOOP_PUB_QOS, LOOP_SUB_QOS
+from pd_ros_common.session import RosSession
 
 
 def parse_args() -> argparse.Namespace:
@@ -66,8 +63,9 @@ def model_path(arg: str, tmp: Path) -> tuple[str, str]:
     return str(save_policy(tmp / "untrained.pt", QNetwork())), "untrained (no shipped model yet)"
 
 
-def measure_latency(args, sup: Supervisor, node: Node, ex, model: str, kind: str) -> dict:
+def measure_latency(args, sup: Supervisor, ros: RosSession, model: str, kind: str) -> dict:
     """State published -> command received, through a real pd_policy_node process."""
+    node = ros.node
     pol = sup.node("pd_policy_node", {"model_path": model, "stats_period_s": 0.0})
     got: list[tuple[float, ThrustCommand]] = []
     node.create_subscription(
@@ -81,7 +79,7 @@ def measure_latency(args, sup: Supervisor, node: Node, ex, model: str, kind: str
     while pub.get_subscription_count() < 1 or node.count_publishers(names.COMMAND_TOPIC) < 1:
         if time.monotonic() > deadline or not pol.alive:
             raise ProcessError(f"policy node did not come up:\n{pol.tail()}")
-        ex.spin_once(timeout_sec=0.05)
+        ros.spin_once()
     time.sleep(0.5)
     sim = Simulator(seed=0)
     sim.reset()
@@ -96,7 +94,7 @@ def measure_latency(args, sup: Supervisor, node: Node, ex, model: str, kind: str
         pub.publish(msg)
         end = t0 + 1.0
         while not got and time.perf_counter() < end:
-            ex.spin_once(timeout_sec=0.1)
+            ros.spin_once(0.1)
         if not got:
             lost += 1
             sim.advance()
@@ -119,8 +117,9 @@ def measure_latency(args, sup: Supervisor, node: Node, ex, model: str, kind: str
     return {**q, "lost": lost}
 
 
-def measure_jitter(args, sup: Supervisor, node: Node, ex) -> dict:
+def measure_jitter(args, sup: Supervisor, ros: RosSession) -> dict:
     """Period jitter of a real pd_sim_node process at 5 Hz, at a subscriber."""
+    node = ros.node
     arrivals: list[float] = []
     node.create_subscription(
         LanderState, names.STATE_TOPIC, lambda m: arrivals.append(time.monotonic()), LOOP_SUB_QOS
@@ -132,11 +131,9 @@ def measure_jitter(args, sup: Supervisor, node: Node, ex) -> dict:
     while len(arrivals) < 3:
         if time.monotonic() > deadline or not simp.alive:
             raise ProcessError(f"simulator did not come up:\n{simp.tail()}")
-        ex.spin_once(timeout_sec=0.05)
+        ros.spin_once()
     arrivals.clear()
-    end = time.monotonic() + args.jitter_s
-    while time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.05)
+    ros.spin_for(args.jitter_s)
     q = percentiles_ms(np.abs(np.diff(arrivals) - 0.2))
     rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
     print(
@@ -155,26 +152,19 @@ def main() -> int:
     domain, _lock = claim_domain_id("ROS_DOMAIN_ID")
     sup = Supervisor(tmp, {"ROS_DOMAIN_ID": str(domain)})
     model, model_kind = model_path(args.model, tmp)
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = Node("pd_bench", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    ros = RosSession("pd_bench", domain)
     report: dict = {"model": model_kind, "cpu_count": os.cpu_count()}
     try:
-        report["latency_ms"] = measure_latency(args, sup, node, ex, model, model_kind)
+        report["latency_ms"] = measure_latency(args, sup, ros, model, model_kind)
         if args.jitter_s > 0:
-            report["jitter_ms"] = measure_jitter(args, sup, node, ex)
+            report["jitter_ms"] = measure_jitter(args, sup, ros)
         print(json.dumps(report))
     except ProcessError as exc:
         print(exc, file=sys.stderr)
         return 1
     finally:
         sup.stop_all()
-        ex.remove_node(node)
-        node.destroy_node()
-        ex.shutdown(timeout_sec=1.0)
-        ctx.try_shutdown()
+        ros.close()
     return 0
 
 

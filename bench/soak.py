@@ -22,9 +22,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -36,6 +33,7 @@ from pd_ros_common.convert import reset_request
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.gaps import SequenceGaps
 from pd_ros_common.process import Supervisor, executable
+from pd_ros_common.session import RosSession
 
 KEEP_ALL = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
@@ -88,11 +86,8 @@ def last_count(pattern: str, log: str) -> int:
 
 def run(args: argparse.Namespace, out: Path, domain: int) -> int:
     sup = Supervisor(out / "logs", {"ROS_DOMAIN_ID": str(domain)})
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = Node("pd_soak", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    ros = RosSession("pd_soak", domain)
+    node = ros.node
     probe = Probe(node)
     rss: dict[str, list[tuple[float, float]]] = {}
     try:
@@ -113,10 +108,8 @@ def run(args: argparse.Namespace, out: Path, domain: int) -> int:
             if time.monotonic() > deadline:
                 print(f"the stack did not come up:\n{sup.logs()}", file=sys.stderr)
                 return 1
-            ex.spin_once(timeout_sec=0.1)
-        t_end = time.monotonic() + 1.0
-        while time.monotonic() < t_end:
-            ex.spin_once(timeout_sec=0.05)
+            ros.spin_once(0.1)
+        ros.spin_for(1.0)
         reset.call_async(reset_request(None, 0))
         t0 = time.monotonic()
         t_end = t0 + args.minutes * 60.0
@@ -129,15 +122,13 @@ def run(args: argparse.Namespace, out: Path, domain: int) -> int:
                     rss.setdefault(c.name, []).append(((now - t0) / 60.0, rss_mib(c.pid)))
                 next_sample += SAMPLE_S
                 sup.check_alive()
-            ex.spin_once(timeout_sec=0.05)
+            ros.spin_once()
         wall = time.monotonic() - t0
         # Stop the traffic (policy, then simulator), let everything in flight arrive, then stop
         # the recorder: the bag and the probe must then hold the same messages.
         pol.stop()
         sim.stop()
-        t_drain = time.monotonic() + 2.0
-        while time.monotonic() < t_drain:
-            ex.spin_once(timeout_sec=0.05)
+        ros.spin_for(2.0)
         bag_note = ""
         if rec is not None:
             rec.stop(sig=signal.SIGTERM)
@@ -149,10 +140,7 @@ def run(args: argparse.Namespace, out: Path, domain: int) -> int:
         report(args, probe, sim.log(), pol.log(), rec.log() if rec else "", bag_note, rss, wall)
     finally:
         sup.stop_all()
-        ex.remove_node(node)
-        node.destroy_node()
-        ex.shutdown(timeout_sec=1.0)
-        ctx.try_shutdown()
+        ros.close()
     return 0
 
 

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         if not flight.spin_until(flight.stack_ready, START_TIMEOUT_S, sup.check_alive):
             tails = "\n".join(f"  {c.name}:\n{c.tail(5)}" for c in sup.children)
             raise FlightError(f"the stack did not come up within {START_TIMEOUT_S:g} s\n{tails}")
-        flight.spin_until(lambda: False, 0.5)  # let discovery settle both ways
+        flight.spin_for(0.5)  # let discovery settle both ways
         print(f"pd_demo: 4 processes up after {time.monotonic() - t_start:.1f} s", flush=True)
 
         episode, s0 = flight.reset(args.seed)

@@ -1,20 +1,15 @@
 """A flight client: one node that resets the simulator, asks the OCP, and follows an episode.
 
-Used by pd_demo (and usable from a notebook): it owns its rclpy context, spins its own executor in
-short slices (never a bare spin), and keeps every state, command and result it hears.
+Used by pd_demo (and usable from a notebook): a `RosSession` (its own context and executor, spun
+in short slices) that keeps every state, command and result it hears.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
@@ -27,21 +22,18 @@ from pd_ros_common.convert import (
     state_from_msg,
     state_vector,
 )
+from pd_ros_common.session import RosSession
 
 
 class FlightError(RuntimeError):
     """The stack did not answer in time or refused."""
 
 
-class FlightClient:
+class FlightClient(RosSession):
     """States, commands and results of the stack in `namespace`; reset and OCP clients."""
 
     def __init__(self, domain_id: int | None = None, namespace: str = "/") -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = Node("pd_flight_client", namespace=namespace, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__("pd_flight_client", domain_id, namespace)
         self.states: list[LanderState] = []
         self.commands: list[ThrustCommand] = []
         self.results: list[EpisodeResult] = []
@@ -56,20 +48,7 @@ class FlightClient:
             ComputeTrajectory, names.OCP_SERVICE, qos_profile=qos.SERVICE_QOS
         )
 
-    # ------------------------------------------------------------------ spinning
-    def spin_until(
-        self, predicate: Callable[[], bool], timeout_s: float, check: Callable[[], None] = None
-    ) -> bool:
-        """Spin until `predicate()` or the deadline; `check()` may raise (a child died)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            if check is not None:
-                check()
-            self.executor.spin_once(timeout_sec=0.05)
-        return bool(predicate())
-
+    # ------------------------------------------------------------------ calls
     def call(self, client: Any, request: Any, timeout_s: float) -> Any:
         future = client.call_async(request)
         if not self.spin_until(future.done, timeout_s):
@@ -127,9 +106,3 @@ class FlightClient:
     @staticmethod
     def ocp_arrays(response: Any) -> dict[str, np.ndarray] | None:
         return ocp_trajectory(response) if response is not None and response.success else None
-
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.context.try_shutdown()

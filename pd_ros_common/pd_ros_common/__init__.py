@@ -2,6 +2,7 @@
 
 `names` (topic and service names), `qos` (QoS profiles), `convert` (messages <-> numpy),
 `params` (typed, checked parameters), `node_help` (`--help` of a node), `run` (a node's
-`main`), `process` (child processes and their supervision), `domain` (a ROS domain of one's own).
+`main`), `process` (child processes and their supervision), `domain` (a ROS domain of one's own),
+`session` (a node with its own context and executor, for tools and benches outside the stack).
 Importing the package imports nothing; each module imports what it needs.
 """

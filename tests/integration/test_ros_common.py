@@ -1,4 +1,4 @@
-"""pd_ros_common's pure parts: parameter coercion and checks, sequence gaps, publisher names,
+"""pd_ros_common: parameter coercion and checks, sequence gaps, publisher names, sessions,
 names, domains; the simulator's command_source check."""
 
 from __future__ import annotations
@@ -9,10 +9,13 @@ import sys
 import time
 
 import pytest
+import rclpy
+from std_msgs.msg import String
 
 from pd_ros_common import names, params
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.gaps import SequenceGaps
+from pd_ros_common.session import RosSession
 from pd_ros_common.sources import PublisherNames
 from pd_sim_node.node import CHECKS as SIM_CHECKS
 from pd_sim_node.node import PARAMETERS as SIM_PARAMS
@@ -163,3 +166,26 @@ def test_a_teardown_that_holds_the_gil_still_exits_and_says_where():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=20)
     assert out.returncode == 1 and time.monotonic() - t0 < 15.0
     assert "Timeout" in out.stderr and "<string>" in out.stderr, out.stderr
+
+
+def test_two_sessions_hear_each_other_and_close_only_their_own_context():
+    """Tools and benches each own a session: one hears the other's message, and closing both
+    leaves rclpy's global context (a caller's) as it was."""
+    was_ok = rclpy.ok()
+    with RosSession("pd_test_talker") as talker, RosSession("pd_test_listener") as listener:
+        heard: list[str] = []
+        listener.node.create_subscription(
+            String, "session_probe", lambda m: heard.append(m.data), 10
+        )
+        pub = talker.node.create_publisher(String, "session_probe", 10)
+        assert listener.spin_until(lambda: pub.get_subscription_count() == 1, 10.0)
+        msg = String(data="hello")
+
+        def publish_and_check() -> None:
+            pub.publish(msg)
+            talker.spin_once(0.0)
+
+        assert listener.spin_until(lambda: heard, 10.0, check=publish_and_check)
+        assert heard[0] == "hello"
+    assert not talker.context.ok() and not listener.context.ok()
+    assert rclpy.ok() == was_ok
