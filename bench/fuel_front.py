@@ -4,16 +4,16 @@
 
 Issue 10 asks for nominal fuel <= 1.05x the fuel-optimal landing; the student copies its
 teacher's braking profile, so a leaner student needs a leaner teacher. Each variant below is the
-`zemzev-vernier` teacher with its braking margin, braking cap or final approach changed, behind
-the shield with the same margin (`shield:controller:...`, with the latency compensation, the
-navigation filter and the measured thrust). The last two size the reserve from what that layer
-has measured (`pd_core.reserve`): the lean profile where it shows a nominal lander, the
-baseline elsewhere; and the lean law everywhere with only the shield's margin adapting (what a
-student that cannot see the measurements would fly). Printed per variant: the median fuel over the
-fuel-optimal landing (`pd_core.ocp`, RL thrust limits) from the first `--states` nominal Table 3
-states, and the mean success of every judged campaign (the seeds of the README tables,
-`--episodes` per scenario; 1000 and 500 there). A variant is a teacher worth training from only
-if it keeps the campaigns where the baseline has them.
+`zemzev-vernier` teacher with its braking margin, braking cap, final approach or lateral t_go
+changed, behind the shield with the same margin (`shield:controller:...`, with the latency
+compensation, the navigation filter and the measured thrust). The last two size the reserve from
+what that layer has measured (`pd_core.reserve`): the lean profile where it shows a nominal
+lander, the baseline elsewhere; and the lean law everywhere with only the shield's margin
+adapting (what a student that cannot see the measurements would fly). Printed per variant: the
+median fuel over the fuel-optimal landing (`pd_core.ocp`, RL thrust limits) from the first
+`--states` nominal Table 3 states, and the mean success of every judged campaign (the seeds of
+the README tables, `--episodes` per scenario; 1000 and 500 there). A variant is a teacher worth
+training from only if it keeps the campaigns where the baseline has them.
 """
 
 from __future__ import annotations
@@ -56,6 +56,8 @@ FIXED = {  # name: (teacher changes, shield changes)
     "95 %, final slope 0.6/s": ({**LEAN, "final_slope_per_s": 0.6}, {"thrust_margin": 0.95}),
     "95 %, final slope 0.7/s": ({**LEAN, "final_slope_per_s": 0.7}, {"thrust_margin": 0.95}),
     "98 %, final slope 0.6/s": (LEAN98, {"thrust_margin": 0.98}),
+    # the lateral ZEM/ZEV t_go on the whole time left, coast included (the reserve unchanged)
+    "lateral t_go, coast included": ({"lateral_coast_share": 1.0}, {}),
 }
 
 

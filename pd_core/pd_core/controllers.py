@@ -49,6 +49,12 @@ class ZemZevParams:
     min_brake_accel_mps2: float = 0.3  # floor of a lateral-limited profile: keep descending
     lateral_limit: bool = True  # slow the descent when the lateral axes need more time
     min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
+    # share of the coast before the braking profile counted in the lateral t_go (0: the braking
+    # time only, the law the shipped policy learnt from; 1: the whole time left). 1 saves 0.5 %
+    # of the nominal fuel (1.116x the optimum against 1.121x, bench/fuel_front.py): the lateral
+    # thrusters already burn about what the optimum burns. Left at 0: a student would need
+    # retraining on three seeds for it, and it does not bring the fuel near 1.05x
+    lateral_coast_share: float = 0.0
     flare_altitude_m: float = 0.5  # below this, horizontal axes only null velocity
     vel_gain_per_s: float = 0.5  # horizontal velocity gain inside the flare (1/s)
     final_slope_per_s: float = 0.3  # near the pad descend no faster than land + this * z
@@ -128,6 +134,23 @@ def profile_accel_for_time_mps2(
     return 2.0 * (altitude_m - t * land_speed_mps) / (t * t)
 
 
+def coast_time_s(
+    altitude_m: np.ndarray, vz_mps: np.ndarray, brake_accel_mps2: np.ndarray, land_speed_mps: float
+) -> np.ndarray:
+    """Time to go (s) that the braking profile's t_go leaves out: a lander descending slower than
+    its profile v^2 = v_land^2 + 2 a z first falls freely (g), and meets the profile lower and
+    faster, at z_c = (u^2 + 2 g z - v_land^2) / (2 (g + a)). The whole time left (fall, then
+    brake) minus the braking time from the current altitude; 0 on or below the profile."""
+    g = -GRAVITY_MPS2[2]
+    z, a = np.maximum(altitude_m, 0.0), brake_accel_mps2
+    u = np.maximum(-np.asarray(vz_mps, dtype=float), 0.0)
+    on_profile = np.sqrt(land_speed_mps**2 + 2.0 * a * z)
+    z_c = np.clip((u * u + 2.0 * g * z - land_speed_mps**2) / (2.0 * (g + a)), 0.0, z)
+    meet = np.sqrt(land_speed_mps**2 + 2.0 * a * z_c)
+    whole = np.maximum(meet - u, 0.0) / g + (meet - land_speed_mps) / a
+    return np.where(u < on_profile, np.maximum(whole - (on_profile - land_speed_mps) / a, 0.0), 0.0)
+
+
 def lateral_brake_accel_mps2(
     states: np.ndarray, params: ZemZevParams, max_thrust_n: np.ndarray
 ) -> np.ndarray:
@@ -170,7 +193,10 @@ class ZemZevController:
         vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])
         # time left on the braking profile (the coast before it is ignored: t_go is an estimate)
-        tgo = np.maximum((brake - p.land_speed_mps) / a_brake, p.min_tgo_s)
+        tgo = (brake - p.land_speed_mps) / a_brake
+        if p.lateral_coast_share > 0.0:
+            tgo = tgo + p.lateral_coast_share * coast_time_s(z, v[:, 2], a_brake, p.land_speed_mps)
+        tgo = np.maximum(tgo, p.min_tgo_s)
         a_h = -6.0 * r[:, 0:2] / tgo[:, None] ** 2 - 4.0 * v[:, 0:2] / tgo[:, None]
         if p.vernier_altitude_m > 0.0:
             v_ref = np.clip(-r[:, 0:2] / p.vernier_tau_s, -p.vernier_speed_mps, p.vernier_speed_mps)

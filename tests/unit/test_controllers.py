@@ -11,6 +11,7 @@ from pd_core.controllers import (
     ZemZevController,
     ZemZevParams,
     braking_accel_mps2,
+    coast_time_s,
     make_controller,
     min_time_to_rest_s,
     profile_accel_for_time_mps2,
@@ -50,6 +51,17 @@ def test_vertical_loop_stays_damped_with_one_step_of_delay():
     assert ro.final_states[:, 5].min() > -1.9  # the former gain: -2.12 m/s
     old = ZemZevController(ZemZevParams(vz_gain_per_s=6.0, land_speed_mps=0.8))
     assert rollout(old, 200, seed=0, dispersions=delay).landed.mean() < 0.97
+
+
+def test_coast_time_is_the_fall_then_brake_time_left_out_of_the_profile():
+    """From rest at z with v_land = 0, falling at g then braking at a takes
+    sqrt(2 z (g + a) / (g a)); the profile alone counts sqrt(2 z / a)."""
+    g, a, z = -GRAVITY_MPS2[2], 2.5, 1500.0
+    extra = coast_time_s(np.array([z]), np.array([0.0]), np.array([a]), 0.0)
+    assert extra[0] + np.sqrt(2 * z / a) == pytest.approx(np.sqrt(2 * z * (g + a) / (g * a)))
+    # on the profile (and faster than it) nothing is left out
+    on = -np.sqrt(2.0**2 + 2 * a * z)
+    assert coast_time_s(np.array([z, z]), np.array([on, on - 5.0]), a, 2.0) == pytest.approx(0.0)
 
 
 def test_min_time_to_rest_is_the_bang_bang_time():
