@@ -192,7 +192,8 @@ class ZemZevController:
         brake = np.sqrt(p.land_speed_mps**2 + 2.0 * a_brake * z)
         vz_ref = -np.minimum(brake, p.land_speed_mps + p.final_slope_per_s * z)
         az = p.vz_gain_per_s * (vz_ref - v[:, 2])
-        # time left on the braking profile (the coast before it is ignored: t_go is an estimate)
+        # time left on the braking profile (an estimate: the coast before it counts only with
+        # lateral_coast_share > 0)
         tgo = (brake - p.land_speed_mps) / a_brake
         if p.lateral_coast_share > 0.0:
             tgo = tgo + p.lateral_coast_share * coast_time_s(z, v[:, 2], a_brake, p.land_speed_mps)
