@@ -13,8 +13,27 @@ from types import TracebackType
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
+
+
+def spin_until(
+    executor: Executor,
+    predicate: Callable[[], bool],
+    timeout_s: float,
+    check: Callable[[], None] | None = None,
+    step_s: float = 0.05,
+) -> bool:
+    """Spin `executor` in `step_s` slices until `predicate()` or the deadline; `check()` may
+    raise (a child died). Shared with the integration tests' `spin_until` fixture."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        if check is not None:
+            check()
+        executor.spin_once(timeout_sec=step_s)
+    return bool(predicate())
 
 
 class RosSession:
@@ -43,14 +62,7 @@ class RosSession:
         check: Callable[[], None] | None = None,
     ) -> bool:
         """Spin until `predicate()` or the deadline; `check()` may raise (a child died)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            if check is not None:
-                check()
-            self.spin_once()
-        return bool(predicate())
+        return spin_until(self.executor, predicate, timeout_s, check)
 
     def close(self) -> None:
         self.executor.remove_node(self.node)

@@ -27,7 +27,6 @@ Fixtures
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -45,6 +44,8 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+
+from pd_ros_common import session  # noqa: E402
 
 
 def pytest_report_header(config: pytest.Config) -> str:
@@ -95,11 +96,6 @@ def spin_until(ros_executor: SingleThreadedExecutor) -> Callable[..., bool]:
     def spin(
         predicate: Callable[[], bool], timeout_sec: float = 10.0, step_sec: float = 0.05
     ) -> bool:
-        deadline = time.monotonic() + timeout_sec
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            ros_executor.spin_once(timeout_sec=step_sec)
-        return bool(predicate())
+        return session.spin_until(ros_executor, predicate, timeout_sec, step_s=step_sec)
 
     return spin
