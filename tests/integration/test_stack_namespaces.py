@@ -7,12 +7,14 @@
 - /vehicle2 follows the README's `ros2 run` order: the simulator first, the policy seconds later.
   The simulator waits for the first command before its clock starts, so nothing is missed at
   start-up and it lands;
-- nothing crosses between the namespaces (each simulator counts only its own commands);
+- nothing crosses between the namespaces (each simulator rejects only its own policy's late
+  answers, one per step flown without them);
 - the policy node stops on SIGINT without "publisher's context is invalid".
 """
 
 from __future__ import annotations
 
+import re
 import signal
 
 import pytest
@@ -62,7 +64,9 @@ def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin
             name="sim1",
         )
         pol1 = procs.node("pd_policy_node", {}, ns1, name="policy1")
-        sim2 = procs.node("pd_sim_node", {"seed": 2, "rate_hz": 10.0}, ns2, name="sim2")
+        sim2 = procs.node(  # every rejection logged, so each can be told apart below
+            "pd_sim_node", {"seed": 2, "rate_hz": 10.0, "log_rejections": 10000}, ns2, name="sim2"
+        )
         assert sim2.wait_log("episode 1 starts", START_S), procs.logs()
         spin_until(lambda: False, README_DELAY_S)
         pol2 = procs.node("pd_policy_node", {}, ns2, name="policy2")
@@ -73,7 +77,12 @@ def test_two_namespaced_stacks_land_in_any_start_order(tmp_path, make_node, spin
         # The simulator's clock started with the first answer: nothing missed at start-up,
         # and at most a few late answers (100 ms deadline) on a loaded machine.
         assert r2.missed_commands <= r2.steps // 10, r2
-        assert r2.rejected_commands == 0, "vehicle1's stray commands reached vehicle2"
+        # Nothing crossed from vehicle1: a stray there would reach vehicle2 steps ahead or for
+        # an answered step ("ahead", "conflict"). The only rejections allowed are the policy's
+        # own answers that came after their step was flown without them (one per miss).
+        kinds = re.findall(r"command rejected \((\w+)\)", sim2.log())
+        assert r2.rejected_commands <= r2.missed_commands, (kinds, r2)
+        assert set(kinds) <= {"stale"}, f"vehicle1's stray commands reached vehicle2: {kinds}"
         assert len(strays) > 50
         assert r1.rejected_commands >= len(strays) * 0.9, (r1.rejected_commands, len(strays))
         # (the stray's first commands may come before the graph names its node: still foreign)
