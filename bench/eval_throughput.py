@@ -28,10 +28,10 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from pd_core.campaign import load_actor, metrics, run_campaign  # noqa: E402
 from pd_core.dispersions import NOMINAL  # noqa: E402
 from pd_core.env import make_vector_env  # noqa: E402
-from pd_core.evaluate import CHUNK_EPISODES, fly_episodes  # noqa: E402
+from pd_core.experiments.campaign import load_actor, metrics, run_campaign  # noqa: E402
+from pd_core.experiments.evaluate import CHUNK_EPISODES, fly_episodes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +43,7 @@ def one_process(spec: str, episodes: int) -> tuple[float, dict]:
 
 
 def on_ray(spec: str, episodes: int) -> tuple[float, dict]:
-    from pd_core.ray_campaign import run_campaign_ray  # Ray only for this half
+    from pd_core.experiments.ray_campaign import run_campaign_ray  # Ray only for this half
 
     t0 = time.perf_counter()
     flown = run_campaign_ray({"a": spec}, [NOMINAL], episodes, seed=0, progress=False)
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--ray-cpus", type=int, default=2)
     p.add_argument("--json", help="also write the figures to this file")
     args = p.parse_args(argv)
-    from pd_core.ray_session import connect  # Ray only for the Ray half
+    from pd_core.experiments.ray_session import connect  # Ray only for the Ray half
 
     agents = {"DQN (shipped)": args.model, "ZEM/ZEV": "controller:zemzev"}
     rows, profiles = {}, {}

@@ -27,11 +27,11 @@ import numpy as np  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
 from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
-from pd_core.campaign import load_actor  # noqa: E402
 from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
-from pd_core.controllers import make_controller  # noqa: E402
 from pd_core.dynamics import mass_flow_kgps  # noqa: E402
-from pd_core.evaluate import rollout  # noqa: E402
+from pd_core.experiments.campaign import load_actor  # noqa: E402
+from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.teachers.registry import make_controller  # noqa: E402
 
 BANDS_M = (500.0, 20.0)  # part 2 splits each flight at these altitudes
 

@@ -57,7 +57,7 @@ def model_path(arg: str, tmp: Path) -> tuple[str, str]:
     import torch  # optional heavy dependency: only without a shipped model
 
     from pd_core.dqn.network import QNetwork
-    from pd_core.policy import save_policy
+    from pd_core.runtime.policy_file import save_policy
 
     torch.manual_seed(0)
     return str(save_policy(tmp / "untrained.pt", QNetwork())), "untrained (no shipped model yet)"

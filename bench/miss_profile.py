@@ -20,8 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
-from pd_core.campaign import load_actor  # noqa: E402
-from pd_core.evaluate import Rollouts, rollout  # noqa: E402
+from pd_core.experiments.campaign import load_actor  # noqa: E402
+from pd_core.experiments.evaluate import Rollouts, rollout  # noqa: E402
 
 GATES_M = (100.0, 20.0, 10.0, 5.0, 2.0, 1.0)
 BANDS_M = ((0.0, 2.0), (2.0, 5.0), (5.0, 20.0), (20.0, 100.0), (100.0, 1e4))

@@ -1,4 +1,5 @@
-"""Receding-horizon teacher (pd_core.mpc): per-step re-plan time beside a cold free-final-time
+"""Receding-horizon teacher (pd_core.teachers.mpc): per-step re-plan time beside a cold
+free-final-time
 solve, and closed-loop success and fuel beside ZEM/ZEV, in one run.
 
 Part 1 flies `--episodes` nominal Table 3 episodes (disturbances on, seed `--seed`) with mpc-fuel,
@@ -13,7 +14,8 @@ Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="h
 highspy directly (no presolve), on the same LPs.
 
 Part 3 (`--demos N`): wall time of N teacher demonstration episodes
-(`pd_core.teacher_demos.controller_demonstrations`, mpc-fuel, every core, under `--dispersions`)
+(`pd_core.demonstrations.teacher_flown.controller_demonstrations`, mpc-fuel, every core, under
+`--dispersions`)
 and the time it implies for 1000 (issue 10 asks <= 10 min on this 2-core machine).
 
 Single-threaded BLAS (set below before numpy loads), as bench/ocp_speed.py.
@@ -33,12 +35,13 @@ from scipy.optimize import linprog  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
-from pd_core.controllers import ZemZevController, make_controller  # noqa: E402
-from pd_core.evaluate import rollout  # noqa: E402
-from pd_core.mpc import MPCController, MPCParams  # noqa: E402
+from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
+from pd_core.experiments.evaluate import rollout  # noqa: E402
 from pd_core.ocp.fuel import fuel_weights, new_highs, solve_lp  # noqa: E402
 from pd_core.ocp.model import KN  # noqa: E402
-from pd_core.teacher_demos import controller_demonstrations  # noqa: E402
+from pd_core.teachers.mpc import MPCController, MPCParams  # noqa: E402
+from pd_core.teachers.registry import make_controller  # noqa: E402
+from pd_core.teachers.zemzev import ZemZevController  # noqa: E402
 
 
 def _ms(v: list[float], q: float) -> float:

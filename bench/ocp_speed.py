@@ -16,7 +16,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
-from pd_core.demos import table1_initial_states  # noqa: E402
+from pd_core.demonstrations.open_loop import table1_initial_states  # noqa: E402
 
 VARIANTS = {
     "slsqp_fd": {"method": "slsqp", "exact_gradients": False},

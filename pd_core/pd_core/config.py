@@ -139,22 +139,20 @@ NEAR_PAD_SCALE = np.array([2.0, 2.0, 10.0, 0.5, 0.5, 2.0])
 # --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
 
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
-# ours: the lean profile, flown where the runtime layer has measured a nominal lander
-# (pd_core.reserve): braking on 98 % of the capability, final slope 0.6/s (bench/fuel_front.py)
-LEAN_BRAKE_MARGIN = 0.98
-LEAN_FINAL_SLOPE_PER_S = 0.6
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
 # ours: the braking shield lets a lander touch down this fast (half of Eq. 12's 2 m/s)
 TOUCHDOWN_SPEED_MPS = 1.0
-GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.shield)
+GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.runtime.rules)
 # ours: where the guard's raised level would climb faster than this, it lets a lander descending
-# slower than the land speed fall freely (pd_core.shield: the hover trap of light landers)
+# slower than the land speed fall freely (pd_core.runtime.rules: the hover trap of light landers)
 GUARD_CLIMB_MPS2 = 1.0
 HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
 # ours: below this (observed) mass the teacher flies: lighter than the student was trained to land
-# (its lightest training starts, 1600 kg, touch down at about 1300-1350 kg; pd_core.shield)
+# (its lightest training starts, 1600 kg, touch down at about 1300-1350 kg; pd_core.runtime.rules)
 HANDOVER_MASS_KG = 1350.0
-MAX_DELAY_STEPS = 8  # ours: longest actuation delay (1.6 s) identified in flight (pd_core.latency)
+MAX_DELAY_STEPS = (
+    8  # ours: longest actuation delay (1.6 s) identified in flight (pd_core.runtime.latency)
+)
 
 # --- Episodes (Sec. 4.2) ----------------------------------------------------------------------
 

@@ -188,7 +188,8 @@ def success_vs_wall_time(runs: dict[str, str | Path], out: str | Path) -> Path:
 
 
 def campaign_summary(t: dict[str, Any], out: str | Path) -> Path:
-    """A dispersion campaign (`pd_core.campaign.table`): success, 99th-percentile miss and median
+    """A dispersion campaign (`pd_core.experiments.campaign.table`): success, 99th-percentile miss
+    and median
     fuel per scenario, one bar per agent."""
     plt = _plt()
     names = [d["name"] for d in t["scenarios"]]

@@ -33,9 +33,10 @@ from typing import Any
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
+from pd_core.commands import Command
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, StateRange
 from pd_core.env import PoweredDescentEnv, Status
-from pd_core.ocp import check_request
+from pd_core.ocp.request import check_request
 from pd_core.reward import missed_limits
 
 MISSING_COMMAND_MODES = ("hold", "zero")
@@ -46,17 +47,6 @@ THRUST_SCALE_RANGE = (0.5, 1.5)  # delivered / commanded thrust the simulator ac
 # A command's thrust must equal the table thrust of its action to this tolerance (N). The policy
 # sends the table value itself, so anything beyond rounding is a sender bug or a tampered message.
 THRUST_MATCH_TOL_N = 1e-6
-
-
-@dataclass(frozen=True)
-class Command:
-    """A thrust command as received: the (episode, step) it answers, its action and thrust (N)."""
-
-    episode: int
-    step: int
-    action: int
-    thrust_n: tuple[float, float, float]
-    source: str = ""  # name of the publishing node ("" when unknown or not asked for)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,13 @@
-"""pd_policy_node: answers every lander/state with one lander/thrust_cmd from a policy.
+"""pd_policy_node: answers every lander/state with one lander/thrust_cmd from a policy, and says
+on lander/guidance_status who decided it (one GuidanceStatus per command).
+
+Whatever answers flies through `pd_core.runtime.Runtime`: the network (or controller) behind the
+runtime layer the policy file pins, and one `Decision` per step.
 
 The controller is the trained DQN policy (`controller` dqn, the default; loaded with
 `pd_core.load_policy` from `model_path`) or a reference controller of
-`pd_core.controllers.make_controller` (zemzev, zemzev-vernier, and the MPC teachers where pd_core
+`pd_core.teachers.registry.make_controller` (zemzev, zemzev-vernier, and the MPC teachers where
+pd_core
 has them).
 A missing or mismatched model, or an unknown controller, stops the node at start-up with one line
 naming the file or the name and what is wrong (exit status 1; a bad parameter type is status 2).
@@ -16,6 +21,8 @@ Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import sys
 import time
@@ -29,12 +36,13 @@ from rclpy.node import Node
 
 import pd_core
 from pd_core.config import TABLE3
-from pd_core.policy import SHIELD_MODES, PolicyLoadError
-from pd_core.shield import ShieldedActor, with_settings
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import SHIELD_MODES, PolicyLoadError
 from pd_core.state import check_state
-from pd_interfaces.msg import LanderState, ThrustCommand
+from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
 from pd_ros_common import names, params, qos
-from pd_ros_common.convert import command_msg, state_from_msg
+from pd_ros_common.convert import command_msg, guidance_msg, state_from_msg
 from pd_ros_common.run import run_node
 
 NODE_NAME = names.POLICY_NODE
@@ -49,7 +57,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "controller": (
         DQN,
         "What answers the states: 'dqn' (the trained policy of model_path) or a reference "
-        "controller of pd_core.controllers.make_controller ('zemzev', 'zemzev-vernier', "
+        "controller of pd_core.teachers.registry.make_controller ('zemzev', 'zemzev-vernier', "
         "'mpc-fuel', 'mpc-energy' where pd_core has them).",
     ),
     "model_path": (
@@ -60,22 +68,18 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     "shield": (
         "file",
-        "Braking shield (pd_core.shield: full vertical thrust when the lander descends faster "
-        "than it can still brake, no free fall below 10 m, the teacher above 5 m where its "
-        "lateral limit binds and below 1350 kg, touchdowns judged by their speed, braking "
-        "counted on the thrust measured in flight where it is short; decisions on the state "
-        "the command will meet, under an actuation delay of up to 8 steps identified in "
-        "flight, filtered where the navigation is noisy): 'file' as the policy file's "
-        "metadata says, 'always' (also around a reference controller), or 'never' (the bare "
+        "Runtime layer (pd_core.runtime: prediction through the actuation delay identified in "
+        "flight, navigation filter, handover to ZEM/ZEV-vernier outside the trained envelope, "
+        "braking limit, touchdown guard): 'file' as the policy file pins it, 'always' the "
+        "code's default config (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
     "shield_settings": (
         "",
         "Runtime-layer settings changed from what 'shield' gives, as K=V,K=V (fields of "
-        "pd_core.shield.ShieldParams, e.g. 'nav_filter=0,touchdown_speed_mps=0' for an "
-        "ablation in the closed loop; pd-eval's set:K=V,...:SPEC does the same offline). "
-        "Refused at start-up in one line where there is no shield or a setting is bad. "
-        "Empty = none.",
+        "pd_core.runtime.config.RuntimeConfig, e.g. 'nav_filter.enabled=0,touchdown_speed_mps=0' "
+        "for an ablation in the closed loop; pd-eval's set:K=V,...:SPEC does the same offline). "
+        "Refused at start-up in one line where a setting is bad. Empty = none.",
     ),
     "stats_period_s": (
         10.0,
@@ -106,38 +110,43 @@ def default_model_path() -> Path:
 
 def load_controller(
     name: str, model_path: str, shield: str = "file", settings: str = ""
-) -> tuple[Any, str]:
-    """(controller with act/thrust, description); PolicyLoadError if it cannot be made.
-    `settings` "K=V,K=V" changes the runtime layer (`pd_core.shield.with_settings`)."""
+) -> tuple[Runtime, str]:
+    """(the runtime that flies, description); PolicyLoadError if it cannot be made. `settings`
+    "K=V,K=V" changes its runtime config (`RuntimeConfig.with_settings`)."""
     if name == DQN:
         path = Path(model_path) if model_path else default_model_path()
-        policy = _with_settings(pd_core.load_policy(path, shield=shield), settings)
-        meta = policy.metadata
-        guard = "no braking shield" if policy.shield is None else f"braking shield {policy.shield}"
-        return policy, (
-            f"{path} (network {meta['network']['hidden']}, {policy.actions.n} actions, "
-            f"code {meta.get('code_version', '?')}, {guard})"
+        runtime = pd_core.load_policy(path, shield=shield)
+        meta = runtime.metadata
+        what = (
+            f"{path} (network {meta['network']['hidden']}, {runtime.actions.n} actions, "
+            f"code {meta.get('code_version', '?')}"
         )
-    # Optional heavy dependency (the MPC teachers import the OCP solvers): only when asked for.
-    from pd_core.controllers import make_controller
+    else:
+        # Optional heavy dependency (the MPC teachers import the OCP solvers): only when asked.
+        from pd_core.teachers.registry import make_controller
 
-    try:
-        controller = make_controller(name)
-    except ValueError as exc:
-        raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from exc
-    if shield == "always":  # a controller has no file to ask for it: only "always" shields it
-        controller = _with_settings(ShieldedActor(controller), settings)
-        return controller, f"reference controller {name}, braking shield {controller.shield}"
-    return _with_settings(controller, settings), f"reference controller {name}"
+        try:
+            controller = make_controller(name)
+        except ValueError as exc:
+            raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from exc
+        # a controller has no file to pin a layer: only "always" puts one around it
+        config = RuntimeConfig() if shield == "always" else RuntimeConfig.off()
+        runtime = Runtime(controller, config, name=name)
+        what = f"reference controller {name} ("
+    if settings:
+        try:
+            config = runtime.config.with_settings(settings)
+        except ValueError as exc:
+            raise PolicyLoadError(str(exc)) from None
+        runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
+    layer = "no runtime layer" if runtime.config.is_off else "runtime layer on"
+    return runtime, f"{what}, {layer}, config {config_hash(runtime.config)})"
 
 
-def _with_settings(actor: Any, settings: str) -> Any:
-    if not settings:
-        return actor
-    try:
-        return with_settings(actor, settings)
-    except ValueError as exc:
-        raise PolicyLoadError(str(exc)) from None
+def config_hash(config: RuntimeConfig) -> str:
+    """Short hash of a runtime config (the statistics line and the log name it)."""
+    text = json.dumps(config.to_dict(), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 class PolicyNode(Node):
@@ -153,8 +162,8 @@ class PolicyNode(Node):
         if self.controller_name == DQN:
             # Warm up numpy so the first real state is answered as fast as the rest (not the
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).
-            self.policy.act((TABLE3.lo + TABLE3.hi) / 2)
-            self.policy.shield_fired = 0
+            self.policy.bare_action((TABLE3.lo + TABLE3.hi) / 2)
+        self._episode: int | None = None  # the episode the runtime's memory belongs to
 
         self._times: deque[float] = deque(maxlen=100_000)
         self._since_log: list[float] = []
@@ -167,6 +176,9 @@ class PolicyNode(Node):
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
+        self._status_pub = self.create_publisher(
+            GuidanceStatus, names.GUIDANCE_TOPIC, qos.LOOP_PUB_QOS
+        )
         self._cmd_pub = self.create_publisher(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS)
         self._state_sub = self.create_subscription(
             LanderState,
@@ -218,7 +230,10 @@ class PolicyNode(Node):
             return
         try:
             state = check_state(state_from_msg(msg))
-            action = self._decide(msg.episode, state)
+            if msg.episode != self._episode:
+                self._episode = msg.episode
+                self.policy.begin_episode()
+            action, decision = self.policy.step(state)
         except ValueError as exc:
             self.invalid += 1
             if self.invalid <= LOG_FIRST or self.invalid % 100 == 0:
@@ -228,18 +243,12 @@ class PolicyNode(Node):
                 )
             return
         self._cmd_pub.publish(command_msg(msg, action, self.policy.thrust(action)))
-        self._answered = (msg.episode, msg.step)
         dt = time.perf_counter() - t0
+        self._status_pub.publish(guidance_msg(msg, decision, dt))
+        self._answered = (msg.episode, msg.step)
         self._times.append(dt)
         self._since_log.append(dt)
         self.answered += 1
-
-    def _decide(self, episode: int, state: Any) -> int:
-        """The action for a valid state; a policy (or a shielded controller) with latency
-        compensation remembers the commands of the episode (pd_core.latency)."""
-        if hasattr(self.policy, "act_online"):
-            return self.policy.act_online(state, episode)
-        return self.policy.act(state)
 
     def decision_stats(self, samples: Any = None) -> str:
         a = np.asarray(self._times if samples is None else samples, dtype=float) * 1e3
@@ -251,11 +260,8 @@ class PolicyNode(Node):
         )
 
     def _counts(self) -> str:
-        shielded = getattr(self.policy, "shield_fired", 0)
-        latency = getattr(self.policy, "latency", None)
-        delay = "" if latency is None else f", {latency.describe()}"
         return (
-            f"{self.answered} answered ({shielded} overridden by the shield{delay}), "
+            f"{self.answered} answered ({self.policy.describe()}), "
             f"{self.repeats} repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), "
             f"{self.lost} lost (DDS) states in all"
         )

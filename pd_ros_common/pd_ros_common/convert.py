@@ -14,8 +14,9 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3
 
-from pd_core.sim import Command
-from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_core.commands import Command
+from pd_core.runtime.decision import SOURCES, Decision
+from pd_interfaces.msg import EpisodeResult, GuidanceStatus, LanderState, ThrustCommand
 from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
 
 FRAME_ID = "landing_site"
@@ -71,6 +72,24 @@ def command_msg(state: LanderState, action: int, thrust_n: np.ndarray) -> Thrust
     cmd.header.frame_id = state.header.frame_id
     cmd.thrust = vec3(thrust_n)
     return cmd
+
+
+def guidance_msg(state: LanderState, d: Decision, decision_time_s: float) -> GuidanceStatus:
+    """The GuidanceStatus of the command answering `state` (same header, episode and step)."""
+    msg = GuidanceStatus(
+        episode=state.episode,
+        step=state.step,
+        action=int(d.action),
+        proposed_action=int(d.proposed),
+        source=SOURCES.index(d.source),
+        delay_steps=int(d.delay_steps),
+        thrust_gain_bound=float(d.thrust_gain_bound),
+        nav_filter_engaged=bool(d.nav_filter_engaged),
+        decision_time_s=float(decision_time_s),
+    )
+    msg.header.stamp = state.header.stamp
+    msg.header.frame_id = state.header.frame_id
+    return msg
 
 
 def command_from_msg(msg: ThrustCommand, source: str = "") -> Command:

@@ -10,10 +10,11 @@ from __future__ import annotations
 STATE_TOPIC = "lander/state"
 COMMAND_TOPIC = "lander/thrust_cmd"
 EPISODE_TOPIC = "lander/episode"
+GUIDANCE_TOPIC = "lander/guidance_status"
 RESET_SERVICE = "sim/reset"
 OCP_SERVICE = "ocp/compute_trajectory"
 
-LANDER_TOPICS = (STATE_TOPIC, COMMAND_TOPIC, EPISODE_TOPIC)
+LANDER_TOPICS = (STATE_TOPIC, COMMAND_TOPIC, EPISODE_TOPIC, GUIDANCE_TOPIC)
 POLICY_NODE = "pd_policy_node"  # the stack's commanding node (the simulator's command_source)
 
 

@@ -128,9 +128,10 @@ def test_eval_refuses_mismatched_model(tmp_path, capsys):
     import torch
 
     from pd_core.dqn.network import QNetwork
-    from pd_core.policy import save_policy
+    from pd_core.runtime.config import RuntimeConfig
+    from pd_core.runtime.policy_file import save_policy
 
-    path = save_policy(tmp_path / "m", QNetwork(7, 147, (8,)))
+    path = save_policy(tmp_path / "m", QNetwork(7, 147, (8,)), RuntimeConfig.off())
     js = path.with_suffix(".json")
     meta = json.loads(js.read_text())
     meta["state_scale"] = [1.0] * 7

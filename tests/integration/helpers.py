@@ -42,10 +42,11 @@ def make_model(path: Path, seed: int = 0) -> Path:
     import torch
 
     from pd_core.dqn.network import QNetwork
-    from pd_core.policy import save_policy
+    from pd_core.runtime.config import RuntimeConfig
+    from pd_core.runtime.policy_file import save_policy
 
     torch.manual_seed(seed)
-    return save_policy(path, QNetwork(), {"note": "untrained, for tests"})
+    return save_policy(path, QNetwork(), RuntimeConfig.off(), {"note": "untrained, for tests"})
 
 
 def offline_rollout(model: Path, seed: int, initial_state: np.ndarray) -> list[np.ndarray]:
@@ -57,8 +58,9 @@ def offline_rollout(model: Path, seed: int, initial_state: np.ndarray) -> list[n
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed, options={"initial_state": initial_state})
     states = [info["state"]]
+    policy.begin_episode()
     while True:
-        _, _, term, trunc, info = env.step(policy.act(info["state"]))
+        _, _, term, trunc, info = env.step(policy.step(info["state"])[0])
         states.append(info["state"])
         if term or trunc:
             return states
@@ -73,17 +75,17 @@ def fly_shipped_policy_offline(sim, seed: int, adapt=None):
     """(final true state, policy) of one episode of pd_core's `Simulator` `sim` flown in-process
     by the shipped policy (passed through `adapt`, if given) deciding online on the published
     (observed) state, as the node does."""
-    from pd_core.policy import load_policy
-    from pd_core.sim import Command
+    from pd_core.commands import Command
+    from pd_core.runtime.policy_file import load_policy
     from pd_policy_node.node import default_model_path
 
     policy = load_policy(default_model_path())
     if adapt is not None:
         policy = adapt(policy)
     episode, _, _ = sim.reset(seed=seed)
-    policy.begin_episodes(1)
+    policy.begin_episode()
     while True:
-        a = policy.act_online(sim.observed_state)
+        a, _ = policy.step(sim.observed_state)
         sim.submit(Command(episode, sim.step, a, tuple(float(v) for v in policy.thrust(a))))
         if sim.advance().done:
             return sim.state, policy

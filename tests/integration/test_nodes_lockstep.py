@@ -183,7 +183,7 @@ def test_bad_inputs_rejected_and_loop_goes_on(stack, make_node, spin_until):
 
     pol = load_policy(stack["model"])
     for k in range(3):
-        loop.cmd_pub.publish(command(episode, k, pol.act(expected[k])))
+        loop.cmd_pub.publish(command(episode, k, pol.bare_action(expected[k])))
         assert spin_until(lambda k=k: len(loop.states_of(episode)) >= k + 2, 10.0)
     step = 3
     sim = stack["sim"]

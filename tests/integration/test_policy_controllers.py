@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from helpers import ProcessSet
 
-from pd_core.controllers import CONTROLLERS, make_controller
 from pd_core.env import PoweredDescentEnv
-from pd_core.policy import load_policy
-from pd_core.shield import ShieldedActor
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import load_policy
+from pd_core.teachers.registry import CONTROLLERS, make_controller
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_policy_node.node import default_model_path
@@ -76,13 +77,14 @@ def offline(
     if controller == "dqn":
         ctl = load_policy(default_model_path(), shield=shield)
     else:
-        ctl = make_controller(controller)
-        ctl = ShieldedActor(ctl) if shield == "always" else ctl
+        config = RuntimeConfig() if shield == "always" else RuntimeConfig.off()
+        ctl = Runtime(make_controller(controller), config)
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed)
     states = [info["state"]]
+    ctl.begin_episode()
     while steps is None or len(states) <= steps:
-        _, _, term, trunc, info = env.step(ctl.act(info["state"]))
+        _, _, term, trunc, info = env.step(ctl.step(info["state"])[0])
         states.append(info["state"])
         if term or trunc:
             break
@@ -98,7 +100,7 @@ def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, name, shie
     episode, policy = loop.fly(sim, name, seed=8, shield=shield)
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
-    assert ("braking shield ShieldParams(" in policy.log()) == (shield == "always")
+    assert ("runtime layer on" in policy.log()) == (shield == "always")
     result = next(r for r in loop.results if r.episode == episode)
     expected = offline(name, 8, shield=shield)
     assert result.landed, result.reason
@@ -111,8 +113,8 @@ def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
     episode, policy = loop.fly(sim, "dqn", seed=11, shield="always")
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
-    assert "braking shield ShieldParams(thrust_margin=0.9" in policy.log(), policy.log()
-    assert "overridden by the shield" in policy.log(), policy.log()
+    assert "runtime layer on, config " in policy.log(), policy.log()
+    assert "layer changed " in policy.log(), policy.log()
     result = next(r for r in loop.results if r.episode == episode)
     expected = offline("dqn", 11)
     assert result.landed, result.reason
@@ -120,7 +122,7 @@ def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
     np.testing.assert_array_equal(final_state(result), expected[-1])
 
 
-@pytest.mark.skipif("mpc-fuel" not in CONTROLLERS, reason="pd_core.controllers has no mpc-fuel")
+@pytest.mark.skipif("mpc-fuel" not in CONTROLLERS, reason="pd_core.teachers.zemzev has no mpc-fuel")
 def test_mpc_fuel_flies_over_ros(sim, make_node, spin_until):
     """The MPC teacher answers every state with a valid command (it re-plans every step, so
     only its first steps are flown; its plans depend on solver time limits, so the states are

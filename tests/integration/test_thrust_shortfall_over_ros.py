@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from helpers import fly_shipped_policy_offline, fly_shipped_policy_over_ros
 
-from pd_core.shield import with_settings
+from pd_core.runtime.layer import Runtime
 from pd_core.sim import Simulator
 from pd_ros_common.convert import final_state
 
@@ -17,6 +17,12 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240
 
 SCALE = 0.88
 SEED = 1
+
+
+def nominal_thrust(p: Runtime) -> Runtime:
+    """The same runtime counting on the nominal thrust."""
+    config = p.config.with_settings("measured_thrust=0")
+    return Runtime(p.actor, config, p.actions, p.name, p.metadata)
 
 
 def test_the_policy_node_brakes_on_the_thrust_it_measures_and_lands(
@@ -33,7 +39,5 @@ def test_the_policy_node_brakes_on_the_thrust_it_measures_and_lands(
         policy.latency.vertical_thrust_scale(np.array([0])), SCALE, atol=0.01
     )
     np.testing.assert_array_equal(final_state(result), offline)
-    nominal, _ = fly_shipped_policy_offline(
-        Simulator(thrust_scale=SCALE), SEED, lambda p: with_settings(p, "measured_thrust=0")
-    )
+    nominal, _ = fly_shipped_policy_offline(Simulator(thrust_scale=SCALE), SEED, nominal_thrust)
     assert not (np.linalg.norm(nominal[0:2]) < 5.0 and np.linalg.norm(nominal[3:6]) < 2.0)

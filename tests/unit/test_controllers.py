@@ -6,19 +6,20 @@ import numpy as np
 import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
-from pd_core.controllers import (
+from pd_core.dispersions import SCENARIOS, Dispersions
+from pd_core.experiments.evaluate import final_quantities, rollout
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.teachers.registry import make_controller
+from pd_core.teachers.zemzev import (
     VERNIER_PARAMS,
     ZemZevController,
     ZemZevParams,
     braking_accel_mps2,
     coast_time_s,
-    make_controller,
     min_time_to_rest_s,
     profile_accel_for_time_mps2,
 )
-from pd_core.dispersions import SCENARIOS, Dispersions
-from pd_core.evaluate import final_quantities, rollout
-from pd_core.shield import ShieldedActor
 
 
 def test_braking_profile_is_the_nominal_one_up_to_the_thrust_the_mass_allows():
@@ -122,7 +123,7 @@ def test_vernier_lands_nearer_the_pad_than_zemzev():
     behind the shield, seed 0); the vernier lands within 0.42 m, as often and as softly."""
     out = {}
     for name, params in (("zemzev", ZemZevParams()), ("vernier", VERNIER_PARAMS)):
-        ro = rollout(ShieldedActor(ZemZevController(params)), 300, seed=0)
+        ro = rollout(Runtime(ZemZevController(params), RuntimeConfig()), 300, seed=0)
         q = final_quantities(ro)
         assert ro.landed.all()
         assert q["k_velocity_mps"].min() > -1.0

@@ -6,19 +6,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pd_core.controllers import ZemZevController
-from pd_core.dqn import demonstrations
+from pd_core.demonstrations.teacher_flown import controller_demonstrations
+from pd_core.dqn import demo_memory
 from pd_core.dqn.config import preset
-from pd_core.dqn.demonstrations import (
+from pd_core.dqn.demo_memory import (
     build_demo_memory,
     controller_steps,
     recovery_starts,
     recovery_steps,
 )
 from pd_core.dqn.train import training_reward
-from pd_core.evaluate import rollout
-from pd_core.policy import load_policy
-from pd_core.teacher_demos import controller_demonstrations
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.policy_file import load_policy
+from pd_core.teachers.zemzev import ZemZevController
 
 
 def test_controller_demonstrations_fly_the_dispersed_masses() -> None:
@@ -73,7 +73,7 @@ def test_recovery_demonstrations_start_on_the_students_own_paths() -> None:
 
 
 def test_recovery_starts_from_the_students_failures(monkeypatch) -> None:
-    monkeypatch.setattr(demonstrations, "FAILURE_SEARCH_CHUNK", 40)
+    monkeypatch.setattr(demo_memory, "FAILURE_SEARCH_CHUNK", 40)
     # pd_dqn_best lands about half of `all`: 3 starts from any episode, 5 from failed ones
     starts, seeds, student = recovery_starts(POLICY, 8, 11, "all", failed_share=0.6)
     np.testing.assert_array_equal(seeds[:3], [11, 12, 13])

@@ -1,4 +1,4 @@
-"""pd_core.discretise (Eqs. 5-7) and pd_core.demos (file format)."""
+"""pd_core.discretise (Eqs. 5-7) and pd_core.demonstrations.open_loop (file format)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,13 @@ import pytest
 
 from pd_core import discretise as disc
 from pd_core import ocp
-from pd_core.demos import DemoSet, load_demos, runs_to_demos, save_demos, table1_initial_states
+from pd_core.demonstrations.open_loop import (
+    DemoSet,
+    load_demos,
+    runs_to_demos,
+    save_demos,
+    table1_initial_states,
+)
 
 
 @pytest.fixture(scope="module")

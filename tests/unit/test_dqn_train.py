@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 import torch
 
-from pd_core.dqn.actor import NetActor
+from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.train import Trainer, train
-from pd_core.evaluate import rollout, summarise
-from pd_core.policy import load_policy
-from pd_core.shield import ShieldParams
+from pd_core.experiments.evaluate import rollout, summarise
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import load_policy
 
 torch.set_num_threads(1)
 NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
@@ -111,7 +112,7 @@ def test_short_training_beats_random_policy(tmp_path):
     out = train(cfg, quiet=True)
     assert out["updates"] == 700
     tr = Trainer.resume(tmp_path / "short")
-    trained = summarise(rollout(NetActor(tr.agent.q), 50, seed=123))
+    trained = summarise(rollout(TorchGreedy(tr.agent.q), 50, seed=123))
     rand = summarise(rollout(_Random(0), 50, seed=123))
     # a random policy spends its time far off the target velocity: much lower return
     # a random policy hits the ground at ~ -86 m/s (median, 50 episodes); the seeded short run
@@ -199,11 +200,11 @@ def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path
 def test_shielded_run_evaluates_behind_the_shield_and_files_ask_for_it(tmp_path):
     tr = Trainer(_small(tmp_path, "sh", seed=5, shield=True), quiet=True)
     tr.run()
-    assert load_policy(tmp_path / "sh" / "final.pt").shield == ShieldParams()
+    assert load_policy(tmp_path / "sh" / "final.pt").config == RuntimeConfig()
     # an untrained network crashes; behind the shield it touches down far slower, and the
     # periodic evaluation (which picks best.pt) is the shielded flight
-    shielded = rollout(NetActor(tr.agent.q, ShieldParams()), 20, 0)
-    bare = rollout(NetActor(tr.agent.q), 20, 0)
+    shielded = rollout(Runtime(TorchGreedy(tr.agent.q), RuntimeConfig()), 20, 0)
+    bare = rollout(TorchGreedy(tr.agent.q), 20, 0)
     assert shielded.final_states[:, 5].min() > bare.final_states[:, 5].min() + 5.0
     vk = summarise(shielded)["table7"]["k_velocity_mps"]["min"]
     assert tr.evaluate(episodes=20, seed=0)["kvel_min"] == pytest.approx(vk, abs=1e-9)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pd_core.controllers import ZemZevController
 from pd_core.env import PoweredDescentEnv
-from pd_core.evaluate import format_report, rollout, summarise
+from pd_core.experiments.evaluate import format_report, rollout, summarise
+from pd_core.teachers.zemzev import ZemZevController
 
 
 def test_rollout_episode_i_is_single_env_seeded_seed_plus_i():
@@ -70,7 +70,7 @@ def test_flying_a_controller_imports_neither_torch_nor_ray():
 
     code = (
         "import sys\n"
-        "from pd_core.campaign import run_campaign\n"
+        "from pd_core.experiments.campaign import run_campaign\n"
         "from pd_core.dispersions import SCENARIOS\n"
         "run_campaign({'z': 'controller:zemzev'}, [SCENARIOS['all']], 3, seed=0)\n"
         "import pd_core.cli.evaluate\n"

@@ -1,4 +1,5 @@
-"""pd_core.mpc and pd_core.teacher_demos: the closed-loop teacher lands, falls back safely, and its
+"""pd_core.teachers.mpc and pd_core.demonstrations.teacher_flown: the closed-loop teacher lands,
+falls back safely, and its
 demonstrations and DAgger labels are what they claim to be."""
 
 from __future__ import annotations
@@ -9,11 +10,12 @@ import pytest
 from pd_core import discretise as disc
 from pd_core import ocp
 from pd_core.config import RL_THRUST
-from pd_core.controllers import CONTROLLERS, ZemZevController, make_controller
-from pd_core.demos import table1_initial_states
-from pd_core.evaluate import rollout
-from pd_core.mpc import MPCController, MPCParams
-from pd_core.teacher_demos import dagger_labels, mpc_demonstrations
+from pd_core.demonstrations.open_loop import table1_initial_states
+from pd_core.demonstrations.teacher_flown import dagger_labels, mpc_demonstrations
+from pd_core.experiments.evaluate import rollout
+from pd_core.teachers.mpc import MPCController, MPCParams
+from pd_core.teachers.registry import CONTROLLERS, make_controller
+from pd_core.teachers.zemzev import ZemZevController
 
 CASES = table1_initial_states()
 

@@ -12,10 +12,14 @@ import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.dispersions import Dispersions
-from pd_core.evaluate import rollout
-from pd_core.navfilter import WARM_STEPS, NavFilter
-from pd_core.policy import load_policy
-from pd_core.shield import ShieldParams, latency_for
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RuntimeConfig
+from pd_core.runtime.latency import LatencyCompensator
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.navfilter import NavFilter
+from pd_core.runtime.policy_file import load_policy
+
+WARM_STEPS = NavFilterConfig().warm_steps
 
 ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
 STEPS = 150
@@ -38,7 +42,7 @@ def _filtered(truth: np.ndarray, sigma: tuple[float, float], known_mps2: np.ndar
     noise[:, 0:3] *= sigma[0]
     noise[:, 3:6] *= sigma[1]
     noise[:, 6] = 0.0
-    f = NavFilter(1)
+    f = NavFilter(NavFilterConfig(), 1)
     out = [
         f.estimate(truth[k : k + 1] + noise[k : k + 1], np.array([0]), known_mps2[None])[0]
         for k in range(len(truth))
@@ -85,7 +89,7 @@ def test_an_unmodelled_acceleration_does_not_bias_the_estimate():
 
 
 def test_a_new_row_and_a_cleared_row_start_from_their_observation():
-    f = NavFilter(2)
+    f = NavFilter(NavFilterConfig(), 2)
     obs = np.array([[1.0, 2.0, 3.0, 0.0, 0.0, -1.0, 1900.0]] * 2)
     np.testing.assert_array_equal(f.estimate(obs, np.array([0, 1]), np.zeros((2, 3))), obs)
     f.clear(np.array([1]))
@@ -100,21 +104,22 @@ def test_the_shipped_policy_lands_heavy_navigation_noise_it_loses_without_the_fi
     )
     policy = load_policy(ROBUST)
     on = rollout(policy, 200, 9_700_000, dispersions=nav4).landed.mean()
-    policy.shield = replace(policy.shield, nav_filter=0.0)
-    policy.latency = latency_for(policy.shield)
+    cfg = replace(policy.config, nav_filter=NavFilterConfig(enabled=False))
+    policy = Runtime(policy.actor, cfg, policy.actions)
     off = rollout(policy, 200, 9_700_000, dispersions=nav4).landed.mean()
     assert on >= 0.99 and off <= 0.97, (on, off)
 
 
 def test_the_setting_is_checked():
-    assert ShieldParams().nav_filter == 1.0
-    with pytest.raises(ValueError, match="nav_filter must be 0 or 1"):
-        ShieldParams(nav_filter=0.5)
+    assert RuntimeConfig().nav_filter.enabled
+    with pytest.raises(ValueError, match="must be true or false"):
+        RuntimeConfig().with_settings("nav_filter=0.5")
 
 
 def test_the_node_statistics_say_whether_the_filter_flies():
-    comp = latency_for(ShieldParams())
+    comp = LatencyCompensator(LatencyConfig(), NavFilterConfig())
     assert comp.describe() == "actuation delay 0 step(s), navigation filter standing by"
     comp.nav.engaged[0], comp.nav.noise_var[0] = True, (9.0, 0.09)
     assert comp.describe().endswith("navigation filter on (noise 3.0 m, 0.30 m/s)")
-    assert "navigation" not in latency_for(ShieldParams(nav_filter=0)).describe()
+    off = LatencyCompensator(LatencyConfig(), NavFilterConfig(enabled=False))
+    assert "navigation" not in off.describe()

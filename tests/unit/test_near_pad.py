@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from pd_core.dqn.actor import NetActor
+from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.agent import DQNAgent
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.network import QNetwork
-from pd_core.policy import load_policy, save_policy
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.policy_file import load_policy, save_policy
 from pd_core.state import near_pad_features, scale_state
 
 torch.set_num_threads(1)
@@ -62,15 +63,15 @@ def test_a_near_pad_file_flies_through_numpy_as_through_torch(tmp_path):
     net = QNetwork(7, 147, (32, 16, 32), "tanh", near_pad=True)
     for p in net.parameters():  # large enough weights that the near-pad columns decide
         p.data.mul_(3.0)
-    path = save_policy(tmp_path / "m", net)
+    path = save_policy(tmp_path / "m", net, RuntimeConfig.off())
     meta = json.loads(path.with_suffix(".json").read_text())
     assert meta["network"]["near_pad"] is True and meta["network"]["n_inputs"] == 7
     pol = load_policy(path)
     s = _states()
     with torch.no_grad():
         want = net(torch.from_numpy(scale_state(s))).numpy()
-    np.testing.assert_allclose(pol.q_values(s), want, atol=1e-4)
-    np.testing.assert_array_equal(pol.act_batch(s[:256]), NetActor(net).act_batch(s[:256]))
+    np.testing.assert_allclose(pol.actor.q_values(s), want, atol=1e-4)
+    np.testing.assert_array_equal(pol.actor.act_batch(s[:256]), TorchGreedy(net).act_batch(s[:256]))
     paper = QNetwork(7, 147, (32, 16, 32), "tanh")
     assert "near_pad" not in paper.shape_metadata()  # files without them keep their metadata
 

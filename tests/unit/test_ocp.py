@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pd_core import dynamics, ocp
-from pd_core.demos import table1_initial_states
+from pd_core.demonstrations.open_loop import table1_initial_states
 
 CASES = table1_initial_states()
 

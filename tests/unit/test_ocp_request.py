@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pd_core import ocp
-from pd_core.demos import table1_initial_states
+from pd_core.demonstrations.open_loop import table1_initial_states
 from pd_core.ocp.request import MAX_CONTROL_POINTS, MAX_TIMEOUT_S, MIN_TIMEOUT_S
 
 S0 = table1_initial_states()[0]

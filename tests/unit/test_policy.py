@@ -9,10 +9,11 @@ import pytest
 import torch
 
 import pd_core
-from pd_core.dqn.actor import NetActor
+from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.network import QNetwork
 from pd_core.env import sample_initial_state
-from pd_core.policy import PolicyLoadError, load_policy, save_policy
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.policy_file import PolicyLoadError, load_policy, save_policy
 
 torch.set_num_threads(1)
 
@@ -21,7 +22,7 @@ torch.set_num_threads(1)
 def saved(tmp_path):
     torch.manual_seed(3)
     net = QNetwork(7, 147, (32, 16, 32), "tanh")
-    path = save_policy(tmp_path / "m", net, {"training": {"seed": 3}})
+    path = save_policy(tmp_path / "m", net, RuntimeConfig.off(), {"training": {"seed": 3}})
     return net, path
 
 
@@ -36,10 +37,12 @@ def test_save_and_load_give_identical_actions(saved):
     net, path = saved
     pol = pd_core.load_policy(path)
     s = _states()
-    want = NetActor(net).act_batch(s)
-    np.testing.assert_array_equal(pol.act_batch(s), want)
-    assert [pol.act(x) for x in s] == want.tolist()
-    assert isinstance(pol.act(s[0]), int)
+    want = TorchGreedy(net).act_batch(s)
+    np.testing.assert_array_equal(pol.actor.act_batch(s), want)
+    assert [pol.bare_action(x) for x in s] == want.tolist()
+    pol.begin_episode()
+    assert [pol.step(x)[0] for x in s] == want.tolist()  # a file without a layer flies bare
+    assert isinstance(pol.bare_action(s[0]), int)
     np.testing.assert_allclose(pol.thrust(146), [10e3, 10e3, 13e3])
     meta = json.loads(path.with_suffix(".json").read_text())
     assert meta["network"]["hidden"] == [32, 16, 32] and meta["training"]["seed"] == 3

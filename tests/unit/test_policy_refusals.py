@@ -10,13 +10,14 @@ import pytest
 import torch
 
 from pd_core.dqn.network import QNetwork
-from pd_core.policy import PolicyLoadError, load_policy, save_policy
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.policy_file import PolicyLoadError, load_policy, save_policy
 
 
 @pytest.fixture()
 def saved(tmp_path):
     torch.manual_seed(3)
-    return save_policy(tmp_path / "m", QNetwork(7, 147, (32, 16, 32), "tanh"))
+    return save_policy(tmp_path / "m", QNetwork(7, 147, (32, 16, 32), "tanh"), RuntimeConfig())
 
 
 def refusal(path) -> str:

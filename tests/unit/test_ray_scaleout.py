@@ -14,14 +14,14 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from pd_core.campaign import run_campaign  # noqa: E402
 from pd_core.cli import evaluate as pd_eval  # noqa: E402
 from pd_core.cli import sweep as pd_sweep  # noqa: E402
-from pd_core.controllers import ZemZevController  # noqa: E402
 from pd_core.dispersions import SCENARIOS  # noqa: E402
-from pd_core.evaluate import rollout  # noqa: E402
-from pd_core.ray_campaign import run_campaign_ray  # noqa: E402
-from pd_core.ray_session import RayUnavailable, connect  # noqa: E402
+from pd_core.experiments.campaign import run_campaign  # noqa: E402
+from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.experiments.ray_campaign import run_campaign_ray  # noqa: E402
+from pd_core.experiments.ray_session import RayUnavailable, connect  # noqa: E402
+from pd_core.teachers.zemzev import ZemZevController  # noqa: E402
 
 MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt"
 FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
@@ -74,7 +74,7 @@ def test_killed_worker_shard_is_retried_not_lost_or_doubled(local_ray, tmp_path)
         import os
         import signal
 
-        from pd_core.controllers import ZemZevController
+        from pd_core.teachers.zemzev import ZemZevController
 
         if not marker.exists():  # the first shard to start kills its worker process
             marker.write_text(str(os.getpid()))

@@ -13,15 +13,15 @@ from pd_core import dynamics
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.cli import evaluate as pd_eval
 from pd_core.config import DT_S, G0_MPS2, ISP_S, TABLE1
-from pd_core.controllers import make_controller
 from pd_core.dispersions import NOMINAL, SCENARIOS, Dispersions, rotation_matrix
-from pd_core.evaluate import rollout
-from pd_core.reachability import (
+from pd_core.experiments.evaluate import rollout
+from pd_core.experiments.reachability import (
     braking_authority,
     episode_starts,
     reachable,
     touchdown_speed_bound,
 )
+from pd_core.teachers.registry import make_controller
 
 N = 12
 

@@ -1,8 +1,8 @@
-"""Braking shield: its limit is the braking law it claims, it only touches the vertical axis, it
-saves a policy that never brakes, a step that ends on the ground is judged by its touchdown
-speed, its touchdown guard stops free fall near the pad under delay,
-it hands the teacher the states where the teacher's lateral limit binds, and policy files,
-pd-eval specs and training carry it."""
+"""The runtime layer's rules: the braking limit is the braking law it claims, it only touches the
+vertical axis, it saves a policy that never brakes, a step that ends on the ground is judged by
+its touchdown speed, the touchdown guard stops free fall near the pad under delay, the handover
+gives the fallback the states where its lateral limit binds, each step says who decided, and
+policy files and pd-eval specs carry the config."""
 
 from __future__ import annotations
 
@@ -15,30 +15,39 @@ import pytest
 import torch
 
 from pd_core.actions import DEFAULT_ACTIONS
-from pd_core.campaign import load_actor
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
-from pd_core.controllers import make_controller
 from pd_core.dispersions import Dispersions, load_scenarios
 from pd_core.dqn.network import QNetwork
 from pd_core.dynamics import step
-from pd_core.evaluate import rollout
-from pd_core.policy import PolicyLoadError, load_policy, save_policy
-from pd_core.shield import (
-    ShieldedActor,
-    ShieldParams,
+from pd_core.experiments.campaign import load_actor
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.config import RulesConfig, RuntimeConfig
+from pd_core.runtime.decision import NETWORK
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import PolicyLoadError, load_policy, save_policy
+from pd_core.runtime.rules import (
+    apply_rules,
+    brake_mask,
     guard_mask,
     handover_mask,
     max_descent_speed_mps,
-    shield_actions,
-    shield_mask,
 )
+from pd_core.teachers.registry import make_controller
+from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController
 
 torch.set_num_threads(1)
 G = -GRAVITY_MPS2[2]
 TZ = RL_THRUST.max_n[2]
-P = ShieldParams()
-BRAKE_ONLY = ShieldParams(guard_altitude_m=0.0, handover_altitude_m=0.0)
+P = RulesConfig()
+BRAKE_ONLY = RulesConfig(guard_altitude_m=0.0, handover_altitude_m=0.0)
 ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
+FALLBACK = ZemZevController(VERNIER_PARAMS)
+
+
+def shield_actions(acts, states, space, p, scale=None):
+    """(actions flown, mask of the steps a rule changed) of `apply_rules`."""
+    out, source = apply_rules(np.asarray(acts), states, space, p, FALLBACK, scale)
+    return out, source != NETWORK
 
 
 def test_limit_is_the_margin_braking_law():
@@ -71,11 +80,13 @@ def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
     az = 0.9 * DEFAULT_ACTIONS.thrust(acts)[:, 2] / s[:, 6] - G
     z1 = s[:, 2] + s[:, 5] * DT_S + 0.5 * az * DT_S**2
     limit = max_descent_speed_mps(z1, s[:, 6], TZ, P)
-    np.testing.assert_array_equal(fired, -(s[:, 5] + az * DT_S) > limit)
-    thrust_z = DEFAULT_ACTIONS.thrust(acts)[:, 2]
-    np.testing.assert_array_equal(fired, shield_mask(s, thrust_z, TZ, limit_only))
-    assert 0.2 < fired.mean() < 0.8  # the draw exercises both branches
     before, after = DEFAULT_ACTIONS.level_table[acts], DEFAULT_ACTIONS.level_table[out]
+    over = -(s[:, 5] + az * DT_S) > limit
+    # a step counts as changed only where the vertical level was not full already
+    np.testing.assert_array_equal(fired, over & (before[:, 2] != 2))
+    thrust_z = DEFAULT_ACTIONS.thrust(acts)[:, 2]
+    np.testing.assert_array_equal(over, brake_mask(s, thrust_z, TZ, limit_only))
+    assert 0.2 < fired.mean() < 0.8  # the draw exercises both branches
     np.testing.assert_array_equal(after[:, 0:2], before[:, 0:2])  # horizontal untouched
     np.testing.assert_array_equal(after[fired, 2], 2)  # full vertical thrust
     np.testing.assert_array_equal(out[~fired], acts[~fired])
@@ -124,9 +135,9 @@ def test_a_step_that_ends_on_the_ground_is_judged_by_its_touchdown_speed():
         [[0.0, 0.0, 0.06, 0.0, 0.0, 0.02, 1400.0], [0.0, 0.0, 0.3, 0.0, 0.0, -1.0, 1400.0]]
     )
     zero = np.zeros(2)
-    np.testing.assert_array_equal(shield_mask(s, zero, TZ, P), [False, True])
+    np.testing.assert_array_equal(brake_mask(s, zero, TZ, P), [False, True])
     old = dataclasses.replace(P, touchdown_speed_mps=0.0)
-    np.testing.assert_array_equal(shield_mask(s, zero, TZ, old), [True, True])
+    np.testing.assert_array_equal(brake_mask(s, zero, TZ, old), [True, True])
 
 
 def test_the_braking_limit_counts_on_the_measured_thrust_where_it_is_short():
@@ -142,10 +153,10 @@ def test_the_braking_limit_counts_on_the_measured_thrust_where_it_is_short():
         for scale in (None, np.array([1.0]), np.array([1.1]), np.array([0.85]))
     ]
     assert fired == [False, False, False, True]
-    off = dataclasses.replace(P, measured_thrust=0.0)
+    off = dataclasses.replace(P, measured_thrust=False)
     assert not shield_actions(a, s, DEFAULT_ACTIONS, off, np.array([0.85]))[1][0]
-    with pytest.raises(ValueError, match="measured_thrust must be 0 or 1"):
-        dataclasses.replace(P, measured_thrust=0.5)
+    with pytest.raises(ValueError, match="measured_thrust must be true or false"):
+        RuntimeConfig().with_settings("measured_thrust=0.5")
 
 
 def test_the_shipped_policy_lands_a_15_percent_shortfall_by_the_measured_thrust():
@@ -154,9 +165,8 @@ def test_the_shipped_policy_lands_a_15_percent_shortfall_by_the_measured_thrust(
     what the engine was measured to deliver, 99.0 %."""
     d = Dispersions("thrust15", thrust_error=0.15)
     rates = []
-    for on in (1.0, 0.0):
-        policy = load_policy(ROBUST)
-        policy.shield = dataclasses.replace(policy.shield, measured_thrust=on)
+    for on in (1, 0):
+        policy, _ = load_actor(f"set:measured_thrust={on}:{ROBUST}")
         rates.append(rollout(policy, 200, 9_800_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.975 and rates[1] <= 0.93, rates
 
@@ -169,8 +179,7 @@ def test_light_landers_in_gusts_touch_down_instead_of_bouncing():
     d = Dispersions("light-gusts", mass_kg=(1500.0, 1700.0), disturbance_scale=4.0)
     rates = []
     for td in (P.touchdown_speed_mps, 0.0):
-        actor, _ = load_actor("shield:controller:zemzev-vernier")
-        actor.shield = dataclasses.replace(actor.shield, touchdown_speed_mps=td)
+        actor, _ = load_actor(f"set:touchdown_speed_mps={td}:shield:controller:zemzev-vernier")
         rates.append(rollout(actor, 200, 9_700_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.995 and rates[1] <= 0.97, rates
 
@@ -241,10 +250,11 @@ def test_handover_gives_the_teacher_only_lateral_limited_states_above_5_m():
             [0.0, -1800.0, 4.0, 0.0, -40.0, -1.0, 1800.0],  # below the handover altitude
         ]
     )
-    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, P), [True, False, False])
-    assert not handover_mask(
-        s, RL_THRUST.max_n, dataclasses.replace(P, handover_altitude_m=0)
-    ).any()
+    np.testing.assert_array_equal(
+        handover_mask(s, RL_THRUST.max_n, P, FALLBACK), [True, False, False]
+    )
+    no_alt = dataclasses.replace(P, handover_altitude_m=0)
+    assert not handover_mask(s, RL_THRUST.max_n, no_alt, FALLBACK).any()
     keep = DEFAULT_ACTIONS.levels_to_action(np.array([[3, 3, 2]] * 3))  # no lateral thrust
     out, overridden = shield_actions(keep, s, DEFAULT_ACTIONS, P)
     teacher = make_controller("zemzev-vernier").act_batch(s[:1])
@@ -259,9 +269,9 @@ def test_the_teacher_flies_landers_lighter_than_the_student_learned():
     above it nothing changes; `handover_mass_kg` 0 never hands over for mass."""
     s = np.tile([0.0, 0.0, 3.0, 0.4, 0.0, -0.8, 1300.0], (2, 1))
     s[1, 6] = 1400.0
-    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, P), [True, False])
+    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, P, FALLBACK), [True, False])
     off = dataclasses.replace(P, handover_mass_kg=0.0)
-    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, off), [False, False])
+    np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, off, FALLBACK), [False, False])
     keep = DEFAULT_ACTIONS.levels_to_action(np.array([[0, 3, 2]] * 2))
     out, overridden = shield_actions(keep, s, DEFAULT_ACTIONS, P)
     teacher = make_controller("zemzev-vernier").act_batch(s[:1])
@@ -275,8 +285,7 @@ def test_the_shipped_policy_lands_light_landers_in_gusts_by_the_mass_handover():
     d = Dispersions("light-gusts", mass_kg=(1350.0, 1500.0), disturbance_scale=4.0)
     rates = []
     for mass in (P.handover_mass_kg, 0.0):
-        policy = load_policy(ROBUST)
-        policy.shield = dataclasses.replace(policy.shield, handover_mass_kg=mass)
+        policy, _ = load_actor(f"set:handover_mass_kg={mass}:{ROBUST}")
         rates.append(rollout(policy, 300, 9_900_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.995 and rates[1] <= 0.985, rates
 
@@ -289,8 +298,7 @@ def test_the_shipped_policy_lands_the_wide_box_corners_it_lost_without_the_hando
     seeds = [50_000_000 + i for i in (1544, 3680, 7318, 7464, 8466, 8729)]
     landed = {}
     for alt in (0.0, 5.0):
-        policy = load_policy(ROBUST)
-        policy.shield = dataclasses.replace(policy.shield, handover_altitude_m=alt)
+        policy, _ = load_actor(f"set:handover_altitude_m={alt}:{ROBUST}")
         ro = rollout(policy, len(seeds), 0, dispersions=box, episode_seeds=seeds)
         landed[alt] = int(ro.landed.sum())
     assert landed == {0.0: 0, 5.0: 6}
@@ -300,50 +308,83 @@ def test_the_shipped_policy_lands_the_wide_box_corners_it_lost_without_the_hando
 def files(tmp_path):
     torch.manual_seed(3)
     net = QNetwork(7, 147, (16, 16), "tanh")
-    bare = save_policy(tmp_path / "bare", net, {})
-    shielded = save_policy(tmp_path / "sh", net, {"shield": {"thrust_margin": 0.8}})
+    bare = save_policy(tmp_path / "bare", net, RuntimeConfig.off())
+    margin = RuntimeConfig(rules=RulesConfig(thrust_margin=0.8))
+    shielded = save_policy(tmp_path / "sh", net, margin)
     return bare, shielded
 
 
-def test_policy_files_fly_behind_the_shield_their_metadata_asks_for(files):
+def test_policy_files_fly_behind_the_runtime_config_they_pin(files):
     bare, shielded = files
-    assert load_policy(bare).shield is None
-    assert load_policy(shielded).shield == ShieldParams(thrust_margin=0.8)
-    assert load_policy(shielded, shield="never").shield is None
-    assert load_policy(bare, shield="always").shield == ShieldParams()
-    falling = np.array([[0.0, 0.0, 500.0, 0.0, 0.0, -90.0, 2000.0]])
+    assert load_policy(bare).config == RuntimeConfig.off()
+    assert load_policy(shielded).config.rules == RulesConfig(thrust_margin=0.8)
+    assert load_policy(shielded, shield="never").config.is_off
+    assert load_policy(bare, shield="always").config == RuntimeConfig()
+    falling = np.array([0.0, 0.0, 500.0, 0.0, 0.0, -90.0, 2000.0])
     p = load_policy(shielded)
-    a = p.act_batch(falling)
-    assert DEFAULT_ACTIONS.level_table[a[0], 2] == 2 and p.shield_fired == 1
-    assert p.act(falling[0]) == a[0] and p.shield_fired == 2
-    assert load_actor(f"bare:{shielded}")[0].shield is None
-    assert load_actor(f"shield:{bare}")[0].shield == ShieldParams()
+    p.begin_episode()
+    a, decision = p.step(falling)
+    assert DEFAULT_ACTIONS.level_table[a, 2] == 2 and decision.action == a
+    # the bare network (no layer) would not have braked: the layer decided, and says so
+    assert p.bare_action(falling) == decision.proposed != a
+    assert decision.source == "brake" and p.counts["brake"] == 1 and p.changed == 1
+    assert load_actor(f"bare:{shielded}")[0].config.is_off
+    assert load_actor(f"shield:{bare}")[0].config == RuntimeConfig()
     with pytest.raises(ValueError, match="shield must be one of file, always, never"):
         load_policy(bare, shield="maybe")
 
 
-def test_bad_shield_metadata_is_refused_in_one_line(files):
+def test_bad_runtime_config_is_refused_in_one_line(files):
     _, shielded = files
     js = shielded.with_suffix(".json")
     meta = json.loads(js.read_text())
-    for bad, says in (
-        ({"thrust_margin": 1.5}, "thrust_margin must be in"),
-        ({"guard_altitude_m": -1}, "guard_altitude_m must be in"),
-        ({"handover_altitude_m": -5}, "handover_altitude_m must be in"),
-        ({"touchdown_speed_mps": 2.5}, "touchdown_speed_mps must be 0 or in"),
-        ({"nav_filter": 2}, "nav_filter must be 0 or 1"),
-        ({"gain": 1}, "gain"),
+    good = meta["runtime"]
+    for part, key, value, says in (
+        ("rules", "thrust_margin", 1.5, "thrust_margin must be in"),
+        ("rules", "guard_altitude_m", -1, "guard_altitude_m must be in"),
+        ("rules", "handover_altitude_m", -5, "handover_altitude_m must be in"),
+        ("rules", "touchdown_speed_mps", 2.5, "touchdown_speed_mps must be 0 or in"),
+        ("nav_filter", "enabled", 2, "must be true or false"),
+        ("latency", "max_delay_steps", 1.5, "must be an integer"),
+        ("rules", "gain", 1, "unknown \\['gain'\\]"),
+        ("rules", "thrust_margin", None, "missing \\['thrust_margin'\\]"),
     ):
-        meta["shield"] = bad
+        bad = json.loads(json.dumps(good))
+        if value is None:
+            del bad[part][key]
+        else:
+            bad[part][key] = value
+        meta["runtime"] = bad
         js.write_text(json.dumps(meta))
         with pytest.raises(PolicyLoadError, match=says) as err:
             load_policy(shielded)
-        assert "\n" not in str(err.value) and "bad shield settings" in str(err.value)
+        assert "\n" not in str(err.value) and "bad runtime config" in str(err.value)
 
 
-def test_a_reference_controller_flies_behind_the_same_shield():
-    """shield:controller:zemzev: ZEM/ZEV's own actions, overridden exactly where the shield
-    says, and counted (the like-for-like comparison of the model report)."""
+def test_a_format1_file_is_refused_in_one_line_and_migrated_with_its_values_written_out(files):
+    """A file from before the config was pinned names the migration; the migration writes the
+    config the code of the day flew, the file's own shield settings over the defaults."""
+    from pd_core.runtime.migrate import main as migrate
+
+    _, shielded = files
+    js = shielded.with_suffix(".json")
+    meta = json.loads(js.read_text())
+    del meta["runtime"]
+    meta.update(format_version=1, shield={"thrust_margin": 0.8, "nav_filter": 0.0})
+    js.write_text(json.dumps(meta))
+    with pytest.raises(PolicyLoadError, match="format 1 .* pd_core.runtime.migrate") as err:
+        load_policy(shielded)
+    assert "\n" not in str(err.value)
+    assert migrate([str(js)]) == 0
+    written = json.loads(js.read_text())["runtime"]
+    assert written["rules"]["thrust_margin"] == 0.8 and written["nav_filter"]["enabled"] is False
+    assert written["latency"] == dataclasses.asdict(RuntimeConfig().latency)
+    assert load_policy(shielded).config.rules.thrust_margin == 0.8
+
+
+def test_a_reference_controller_flies_behind_the_same_layer():
+    """shield:controller:zemzev: ZEM/ZEV's own actions, changed exactly where the rules say, and
+    counted by who decided (the like-for-like comparison of the model report)."""
     rng = np.random.default_rng(5)
     s = np.zeros((300, 7))
     s[:, 2] = rng.uniform(0.0, 2500.0, 300)
@@ -352,28 +393,36 @@ def test_a_reference_controller_flies_behind_the_same_shield():
     s[:100, 2] = rng.uniform(0.0, 10.0, 100)  # near the pad, where the guard acts
     s[:100, 5] = rng.uniform(-2.0, 0.5, 100)
     zz = make_controller("zemzev")
-    actor, label = load_actor("shield:controller:zemzev")
-    assert isinstance(actor, ShieldedActor) and label == "controller zemzev + shield"
-    want, fired = shield_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
-    np.testing.assert_array_equal(actor.act_batch(s), want)
-    assert actor.shield_fired == fired.sum() > 0
-    assert actor.act(s[0]) == want[0]
+    off = RuntimeConfig(
+        latency=RuntimeConfig.off().latency, nav_filter=RuntimeConfig.off().nav_filter
+    )
+    actor = Runtime(zz, off)
+    assert load_actor("shield:controller:zemzev")[1] == "controller zemzev + shield"
+    want, changed = shield_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
+    actor.begin_episodes(len(s))
+    got, decisions = actor.step_rows(s, np.arange(len(s)))
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(decisions.source != NETWORK, changed)
+    np.testing.assert_array_equal(decisions.proposed, zz.act_batch(s))
+    assert actor.changed == changed.sum() > 0
+    assert actor.counts["guard"] > 0 and actor.counts["brake"] > 0
     np.testing.assert_array_equal(actor.thrust(want[1]), DEFAULT_ACTIONS.thrust(want[1]))
 
 
 def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
     """pd-eval's `set:K=V,...:SPEC`: an ablation by flag, refused in one line where it cannot
-    apply (a bare controller, an unknown or non-numeric setting, an out-of-range value)."""
+    apply (a bare controller, an unknown or malformed setting, an out-of-range value)."""
     actor, label = load_actor(f"set:nav_filter=0,touchdown_speed_mps=0:{ROBUST}")
-    assert actor.shield.nav_filter == 0.0 and actor.shield.touchdown_speed_mps == 0.0
+    assert not actor.config.nav_filter.enabled and actor.config.rules.touchdown_speed_mps == 0.0
     assert actor.latency.nav is None and actor.latency.max_delay_steps == 8
     assert label == "pd_dqn_robust (nav_filter=0,touchdown_speed_mps=0)"
     ctrl, _ = load_actor("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev")
-    assert ctrl.latency is None and ctrl.shield.guard_altitude_m == P.guard_altitude_m
+    assert ctrl.latency is None and ctrl.config.rules.guard_altitude_m == P.guard_altitude_m
     for spec, says in (
         ("set:nav_filter=0:controller:zemzev", "no runtime layer"),
-        (f"set:gain=1:{ROBUST}", "unknown shield setting"),
-        (f"set:nav_filter:{ROBUST}", "is not KEY=NUMBER"),
+        (f"set:gain=1:{ROBUST}", "'gain' is unknown"),
+        (f"set:enabled=0:{ROBUST}", "'enabled' is ambiguous"),
+        (f"set:nav_filter:{ROBUST}", "is not KEY=VALUE"),
         (f"set:touchdown_speed_mps=3:{ROBUST}", "touchdown_speed_mps must be"),
     ):
         with pytest.raises(ValueError, match=says) as err:

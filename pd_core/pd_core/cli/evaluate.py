@@ -23,7 +23,9 @@ from typing import Any
 import numpy as np
 
 from pd_core import plots
-from pd_core.campaign import (
+from pd_core.config import DT_S
+from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
+from pd_core.experiments.campaign import (
     format_table,
     load_actor,
     reachability,
@@ -31,10 +33,7 @@ from pd_core.campaign import (
     table,
     write_json,
 )
-from pd_core.config import DT_S
-from pd_core.controllers import CONTROLLERS
-from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
-from pd_core.evaluate import (
+from pd_core.experiments.evaluate import (
     Rollouts,
     format_report,
     fuel_optimal_ratios,
@@ -42,8 +41,9 @@ from pd_core.evaluate import (
     summarise,
     to_json,
 )
-from pd_core.policy import PolicyLoadError
-from pd_core.table7 import table7_blocks
+from pd_core.experiments.table7 import table7_blocks
+from pd_core.runtime.policy_file import PolicyLoadError
+from pd_core.teachers.registry import CONTROLLERS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -104,9 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--reachability",
         action="store_true",
-        help="judge every episode some agent failed with pd_core.reachability (OCP plans and a "
-        "full-thrust braking bound, 0.1-2 s each): the table adds the episodes out of reach per "
-        "scenario and each agent's success %% over the reachable ones",
+        help="judge every episode some agent failed with pd_core.experiments.reachability (OCP "
+        "plans and a full-thrust braking bound, 0.1-2 s each): the table adds the episodes out "
+        "of reach per scenario and each agent's success %% over the reachable ones",
     )
     g.add_argument(
         "--ray", action="store_true", help="fly the episodes as Ray tasks (same numbers)"
@@ -201,7 +201,7 @@ def _fly_campaign(
 ) -> dict[str, dict[str, Rollouts]]:
     common = {"disturbance": not args.no_disturbance, "progress": not args.no_progress}
     if args.ray:
-        from pd_core.ray_campaign import run_campaign_ray  # imports Ray: only for --ray
+        from pd_core.experiments.ray_campaign import run_campaign_ray  # imports Ray: only for --ray
 
         return run_campaign_ray(
             agents,

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from pd_core import demos as demos_mod
 from pd_core import discretise as disc
 from pd_core import ocp
 from pd_core.config import (
@@ -28,6 +27,7 @@ from pd_core.config import (
     TABLE5_N_IJ,
     TABLE5_N_K,
 )
+from pd_core.demonstrations import open_loop as demos_mod
 from pd_core.ocp.request import MIN_CONTROL_POINTS
 
 

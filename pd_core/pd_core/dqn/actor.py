@@ -1,41 +1,41 @@
-"""Greedy actor of a live Q-network (training's periodic evaluation, tests).
+"""Greedy actions of a live Q-network (training's periodic evaluation, tests).
 
-A policy *file* needs no torch to fly: `pd_core.policy.load_policy` returns a `Policy` whose
-`act_batch` runs numpy copies of the layers. This actor is for a `QNetwork` object in memory.
+A policy *file* flies through `pd_core.runtime.load_policy` (numpy, no torch). This actor is for
+a `QNetwork` object in memory; put it behind the runtime layer with
+`pd_core.runtime.Runtime(TorchGreedy(net), config)` to evaluate it as it will fly.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 
-from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.dqn.network import QNetwork
-from pd_core.latency import CompensatesLatency
-from pd_core.shield import ShieldParams, latency_for, shield_actions
 from pd_core.state import scale_state
 
 
-class NetActor(CompensatesLatency):
-    """Greedy actions of a Q-network on physical states (`pd_core.evaluate.Actor`), behind the
-    braking shield if given one, with its latency compensation (training evaluates the policy
-    as it will fly)."""
+def network_kwargs(shape: dict[str, Any]) -> dict[str, Any]:
+    """`QNetwork` arguments of a policy file's "network" metadata."""
+    return {
+        "n_inputs": int(shape["n_inputs"]),
+        "n_actions": int(shape["n_actions"]),
+        "hidden": tuple(shape["hidden"]),
+        "activation": shape["activation"],
+        "near_pad": bool(shape.get("near_pad", False)),
+    }
 
-    def __init__(self, net: QNetwork, shield: ShieldParams | None = None) -> None:
+
+class TorchGreedy:
+    """Greedy actions (B,) of a Q-network on physical states (B, 7): the network alone."""
+
+    def __init__(self, net: QNetwork) -> None:
         self.net = net
-        self.shield = shield
-        self.actions = DEFAULT_ACTIONS
-        self.latency = latency_for(shield)
+        self.name = "network"
 
-    def act_batch(
-        self, states: np.ndarray, vertical_thrust_scale: np.ndarray | None = None
-    ) -> np.ndarray:
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
         with torch.no_grad():
-            q = self.net(torch.from_numpy(scale_state(states)))
-        greedy = q.argmax(dim=1).numpy()
-        if self.shield is None:
-            return greedy
-        shielded, _ = shield_actions(
-            greedy, states, DEFAULT_ACTIONS, self.shield, vertical_thrust_scale
-        )
-        return shielded
+            device = next(self.net.parameters()).device
+            q = self.net(torch.from_numpy(scale_state(states)).to(device))
+        return q.argmax(dim=1).cpu().numpy()

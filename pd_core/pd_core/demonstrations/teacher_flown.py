@@ -1,8 +1,9 @@
 """Demonstrations from the closed-loop optimal-control teacher (issue 10): episodes and labels.
 
 * `controller_demonstrations` (`mpc_demonstrations` for the teacher): episodes flown by the
-  receding-horizon teacher (`pd_core.mpc`) or another controller in the disturbed environment
-  (and any dispersions), as 1-step transitions for `pd_core.dqn.demonstrations`.
+  receding-horizon teacher (`pd_core.teachers.mpc`) or another controller in the disturbed
+  environment
+  (and any dispersions), as 1-step transitions for `pd_core.dqn.demo_memory`.
 * `dagger_labels`: the OCP's discretised first action from each given state (DAgger-style expert
   labels on states the agent itself visits).
 
@@ -25,8 +26,9 @@ from pd_core import discretise as disc
 from pd_core import ocp
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST
-from pd_core.controllers import ZemZevController, make_controller
-from pd_core.evaluate import Rollouts, rollout
+from pd_core.experiments.evaluate import Rollouts, rollout
+from pd_core.teachers.registry import make_controller
+from pd_core.teachers.zemzev import ZemZevController
 
 DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balance 2 workers)
 LABEL_CHUNK_STATES = 20
@@ -99,12 +101,12 @@ def controller_demonstrations(
     chunk: int = DEMO_CHUNK_EPISODES,
     episode_seeds: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """Physical 1-step transitions of a controller of `pd_core.controllers` (the MPC teacher
+    """Physical 1-step transitions of a controller of `pd_core.teachers.zemzev` (the MPC teacher
     `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
     seed + i, disturbances on; initial state sampled from Table 3 or row i of `initial_states`):
     states, actions, next_states, dones, episode, landed (per episode) and success_rate.
     `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
-    `pd_core.evaluate.rollout`; `workers` None = every core."""
+    `pd_core.experiments.evaluate.rollout`; `workers` None = every core."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     make_controller(controller)  # an unknown name fails here, in the caller's process

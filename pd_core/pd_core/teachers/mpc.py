@@ -34,7 +34,8 @@ flies the plan's first step quantised to one of the 147 actions, and re-plans at
   time-to-go with the margin, then with the full limits, then with more time (`recovery`). So
   the teacher never fails for want of a plan, and never pays a cold solve mid-flight.
 
-Plans are matched to states, not to row numbers: `pd_core.evaluate.rollout` passes only the
+Plans are matched to states, not to row numbers: `pd_core.experiments.evaluate.rollout` passes
+only the
 landers still flying, so rows shift as episodes end. Each plan remembers the state it predicts
 next (the commanded action, no disturbance); an incoming state continues the plan whose
 prediction is nearest within `continuity_*` (normalised, greedy), and a state that continues no

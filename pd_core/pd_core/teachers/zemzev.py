@@ -13,15 +13,12 @@ Markov (a function of the state only), so a Q-network can imitate it, and it fli
 env, so its transitions are on-distribution demonstrations.
 `pd-eval --controller zemzev` evaluates it like a trained policy.
 
-`mpc-fuel` and `mpc-energy` are the receding-horizon optimal-control teacher (`pd_core.mpc`) with
-the fuel or the energy (Eq. 4) objective, and ZEM/ZEV as its fallback near the pad.
+It imports numpy only: the runtime layer (`pd_core.runtime`) flies it as its fallback.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,10 +28,7 @@ from pd_core.config import (
     DT_S,
     GRAVITY_MPS2,
     LAND_SPEED_MPS,
-    LEAN_BRAKE_MARGIN,
-    LEAN_FINAL_SLOPE_PER_S,
 )
-from pd_core.mpc import MPCController, mpc_controller
 from pd_core.state import check_state
 
 
@@ -86,16 +80,6 @@ class ZemZevParams:
 
 # ZEM/ZEV with the terminal vernier below 5 m (`zemzev-vernier`): a teacher that lands on the pad
 VERNIER_PARAMS = ZemZevParams(vernier_altitude_m=5.0)
-# ... braking on 98 % of the capability with a steeper final approach: the profile
-# `pd_core.reserve` flies where the runtime layer has measured a nominal lander. It leaves the
-# vertical loop no authority of its own: alone it lands 0.3-22 % of the campaigns it is meant
-# for (nominal 1 %), behind a shield at the same margin 99.7-100 % (300 episodes per scenario)
-LEAN_PARAMS = replace(
-    VERNIER_PARAMS,
-    brake_accel_mps2=math.inf,
-    brake_margin=LEAN_BRAKE_MARGIN,
-    final_slope_per_s=LEAN_FINAL_SLOPE_PER_S,
-)
 
 
 def braking_accel_mps2(
@@ -166,7 +150,8 @@ def lateral_brake_accel_mps2(
 
 
 class ZemZevController:
-    """Greedy-style interface of `pd_core.policy.Policy`: `act`, `act_batch`, `thrust`."""
+    """Greedy-style interface of `pd_core.runtime.policy_file.Policy`: `act`, `act_batch`,
+    `thrust`."""
 
     def __init__(
         self, params: ZemZevParams | None = None, actions: ActionSpace = DEFAULT_ACTIONS
@@ -220,24 +205,3 @@ class ZemZevController:
 
     def thrust(self, action: int) -> np.ndarray:
         return self.actions.thrust(int(action))
-
-
-def _mpc(objective: str) -> Callable[[], MPCController]:
-    return lambda: mpc_controller(objective, fallback=ZemZevController())
-
-
-# name -> factory: `pd-eval --controller NAME`, `controller:NAME` specs and the policy node
-FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
-    "zemzev": ZemZevController,
-    "zemzev-vernier": lambda: ZemZevController(VERNIER_PARAMS),
-    "mpc-fuel": _mpc("fuel"),
-    "mpc-energy": _mpc("energy"),
-}
-CONTROLLERS = tuple(FACTORIES)
-
-
-def make_controller(name: str) -> ZemZevController | MPCController:
-    """A fresh controller by name (MPC controllers keep plans: one per campaign or episode)."""
-    if name not in FACTORIES:
-        raise ValueError(f"unknown controller {name!r}; choose from {', '.join(CONTROLLERS)}")
-    return FACTORIES[name]()

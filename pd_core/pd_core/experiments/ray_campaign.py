@@ -1,6 +1,7 @@
 """Campaigns sharded over Ray: each shard (agent, scenario, episode range) is one Ray task.
 
-Shards are cut on multiples of the rollout chunk (`pd_core.campaign.episode_ranges`), so the
+Shards are cut on multiples of the rollout chunk (`pd_core.experiments.campaign.episode_ranges`),
+so the
 merged result is exactly the unsharded one. A task whose worker dies is retried by Ray
 (`max_retries`): a shard's result comes back once, from whichever attempt completed.
 """
@@ -15,10 +16,10 @@ from typing import Any
 import ray  # optional heavy dependency: imported only by the Ray code paths
 from tqdm import tqdm
 
-from pd_core.campaign import AgentSpec, Shard, fly_shard, load_actor, merge, plan
 from pd_core.dispersions import Dispersions
-from pd_core.evaluate import CHUNK_EPISODES, Actor, Rollouts
-from pd_core.ray_session import cluster_cpus, connect
+from pd_core.experiments.campaign import AgentSpec, Shard, fly_shard, load_actor, merge, plan
+from pd_core.experiments.evaluate import CHUNK_EPISODES, Actor, Rollouts
+from pd_core.experiments.ray_session import cluster_cpus, connect
 
 MAX_RETRIES = 3  # attempts after a worker dies (Ray's own retry of system failures)
 
@@ -59,7 +60,8 @@ def run_campaign_ray(
     progress: bool = True,
     max_retries: int = MAX_RETRIES,
 ) -> dict[str, dict[str, Rollouts]]:
-    """`pd_core.campaign.run_campaign` as Ray tasks: {scenario: {agent: Rollouts}}, the same
+    """`pd_core.experiments.campaign.run_campaign` as Ray tasks: {scenario: {agent: Rollouts}},
+    the same
     numbers. RayUnavailable if Ray cannot be started or joined."""
     connect(address)
     n = shards or default_shards(len(agents) * len(scenarios), episodes, chunk)

@@ -10,14 +10,14 @@ import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RewardConfig
-from pd_core.demos import load_demos
+from pd_core.demonstrations.open_loop import load_demos
+from pd_core.demonstrations.teacher_flown import controller_demonstrations
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
-from pd_core.evaluate import rollout
-from pd_core.policy import load_policy
+from pd_core.experiments.evaluate import rollout
 from pd_core.reward import reward as shaped_reward
+from pd_core.runtime.policy_file import load_policy
 from pd_core.state import scale_state
-from pd_core.teacher_demos import controller_demonstrations
 
 CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
@@ -116,7 +116,7 @@ def recovery_starts(
     that follow, up to FAILURE_SEARCH_FACTOR x n_episodes; several states per failed episode
     when it fails less often than that): the teacher then shows the way out of the student's
     own crashes, which uniform draws rarely visit once the student lands 99 %. `shield`: the
-    student flies behind the braking shield (pd_core.shield) even if its file has none."""
+    student flies behind the braking shield (pd_core.runtime.rules) even if its file has none."""
     student = load_policy(policy_path, shield="always" if shield else "file")
     n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed

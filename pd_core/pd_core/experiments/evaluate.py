@@ -134,7 +134,9 @@ def fly_episodes(
     observed = info["observed_state"]
     active = env.active
     actions = np.zeros(n, dtype=np.int64)
-    rowwise = hasattr(actor, "act_rows")  # an actor with memory per lander (pd_core.latency)
+    rowwise = hasattr(
+        actor, "act_rows"
+    )  # an actor with memory per lander (pd_core.runtime.latency)
     if rowwise:
         actor.begin_episodes(n)
     while active.any():

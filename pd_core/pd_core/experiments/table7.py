@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from pd_core.config import PAPER_TABLE7
-from pd_core.evaluate import LABELS, QUANTITIES
+from pd_core.experiments.evaluate import LABELS, QUANTITIES
 
 PAPER_BLOCKS = {"paper Agent 1": "agent1", "paper Agent 2": "agent2"}
 """paper agents printed first: Agent 1 trained with demonstrations, Agent 2 without (Sec. 3.2)"""

@@ -2,10 +2,12 @@
 
 A campaign is (agents) x (scenarios) x (episodes 0..N-1, episode i on env seed s + i). It is cut
 into shards along the episode index on multiples of `CHUNK_EPISODES` (each chunk is flown as one
-batch), so any split into shards, in one process or as Ray tasks (`pd_core.ray_campaign`),
+batch), so any split into shards, in one process or as Ray tasks
+(`pd_core.experiments.ray_campaign`),
 gives exactly the unsharded numbers. Nothing here imports torch (a policy file loads it) or Ray.
 
-With `reachability`, the episodes some agent failed are judged by `pd_core.reachability`, and the
+With `reachability`, the episodes some agent failed are judged by
+`pd_core.experiments.reachability`, and the
 table adds per scenario the episodes proven out of reach and per agent the success rate over the
 others (issue 10: a scenario's 99 % target excludes only what no thrust schedule can land).
 """
@@ -23,9 +25,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from pd_core.controllers import make_controller
 from pd_core.dispersions import Dispersions
-from pd_core.evaluate import (
+from pd_core.experiments.evaluate import (
     CHUNK_EPISODES,
     SOFT_K_VELOCITY_MPS,
     Actor,
@@ -33,10 +34,12 @@ from pd_core.evaluate import (
     concat_rollouts,
     rollout,
 )
-from pd_core.policy import load_policy
-from pd_core.reachability import ScenarioReach, campaign_reachability, failed_episodes
+from pd_core.experiments.reachability import ScenarioReach, campaign_reachability, failed_episodes
 from pd_core.reward import missed_limits
-from pd_core.shield import ShieldedActor, with_settings
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import load_policy
+from pd_core.teachers.registry import make_controller
 
 # An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
 AgentSpec = str | Callable[[], Actor]
@@ -55,21 +58,29 @@ LISTED_FAILURES_TEXT = 3
 
 
 def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
-    """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies as its
-    metadata says (with the braking shield of `pd_core.shield` if it asks for it); `bare:<file>`
-    flies the network alone, `shield:<file>` behind the default shield, and
-    `shield:controller:<name>` the reference controller behind it. `set:K=V[,K=V...]:<spec>`
-    flies <spec> with those runtime-layer settings changed (`ShieldParams`: an ablation by flag,
-    e.g. `set:nav_filter=0,touchdown_speed_mps=0:models/pd_dqn_robust.pt`)."""
+    """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies behind
+    the runtime config it pins (`pd_core.runtime`); `bare:<file>` flies the network alone,
+    `shield:<file>` behind the code's default runtime config, and `shield:controller:<name>` the
+    reference controller behind it. `set:K=V[,K=V...]:<spec>` flies <spec> with those
+    `RuntimeConfig` settings changed (an ablation by flag, e.g.
+    `set:nav_filter.enabled=0,touchdown_speed_mps=0:models/pd_dqn_robust.pt`)."""
     if callable(spec):
         return spec(), getattr(spec, "__name__", "agent")
     if spec.startswith("set:"):
         settings, _, inner = spec[len("set:") :].partition(":")
         actor, label = load_actor(inner)
-        return with_settings(actor, settings), f"{label} ({settings})"
+        if not isinstance(actor, Runtime):
+            raise ValueError(
+                f"runtime settings {settings!r}: {label} has no runtime layer to change "
+                "(a policy file has; a controller has behind shield:controller:NAME)"
+            )
+        config = actor.config.with_settings(settings)
+        return Runtime(actor.actor, config, actor.actions, actor.name, actor.metadata), (
+            f"{label} ({settings})"
+        )
     if spec.startswith("shield:controller:"):
         name = spec.split(":", 2)[2]
-        return ShieldedActor(make_controller(name)), f"controller {name} + shield"
+        return Runtime(make_controller(name), RuntimeConfig()), f"controller {name} + shield"
     if spec.startswith("controller:"):
         name = spec.split(":", 1)[1]
         return make_controller(name), f"controller {name}"
@@ -229,7 +240,8 @@ def reachability(
     seed: int,
     progress: bool = False,
 ) -> dict[str, ScenarioReach]:
-    """{scenario: verdicts on the episodes some agent failed} (`pd_core.reachability`)."""
+    """{scenario: verdicts on the episodes some agent failed}
+    (`pd_core.experiments.reachability`)."""
     bar = _bar(sum(len(failed_episodes(flown[d.name])) for d in scenarios), progress)
     out = campaign_reachability(flown, scenarios, seed, on_episode=lambda: bar.update(1))
     bar.close()
@@ -323,7 +335,10 @@ def format_table(t: dict[str, Any]) -> str:
         for a, v in t["mean_success_rate_reachable"].items():
             rate = "-" if v is None else f"{100 * v:.2f} %"
             lines.append(f"mean success over the reachable episodes, {a}: {rate}")
-        lines += ["", "reachability of the episodes some agent failed (pd_core.reachability):"]
+        lines += [
+            "",
+            "reachability of the episodes some agent failed (pd_core.experiments.reachability):",
+        ]
         for name, r in reach.items():
             lines.append(
                 f"  {name}: {r['checked_episodes']} judged, {r['out_of_reach']} out of reach "

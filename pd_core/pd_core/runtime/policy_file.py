@@ -1,9 +1,12 @@
-"""Trained policies on disk: `save_policy` writes them, `load_policy` checks and loads them.
+"""Policy files: `save_policy` writes them, `load_policy` checks them and returns a `Runtime`.
 
 A policy is two files: `<name>.pt` (the Q-network's tensors, read with
-`torch.load(weights_only=True)` so a model file cannot run code) and `<name>.json` (metadata:
-network shape, action discretisation, thrust limits, state scaling, dt, training config, seed, code
+`torch.load(weights_only=True)` so a model file cannot run code; torch is imported only here,
+only to read them) and `<name>.json` (metadata: network shape, action discretisation, thrust
+limits, state scaling, dt, the whole `RuntimeConfig` under "runtime", training config, seed, code
 version). A file whose metadata disagrees with this code is refused with the difference named.
+Files of format 1 (before the runtime config was pinned) are refused in one line that names
+`python -m pd_core.runtime.migrate`, which writes their config out.
 """
 
 from __future__ import annotations
@@ -19,13 +22,14 @@ import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, N_ACTIONS_PER_AXIS, RL_THRUST, STATE_SCALE, ThrustLimits
-from pd_core.latency import CompensatesLatency
-from pd_core.shield import ShieldParams, latency_for, shield_actions
-from pd_core.state import check_state, near_pad_features
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.network import NumpyQNetwork
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SHIELD_MODES = ("file", "always", "never")
-"""`load_policy(shield=...)`: as the metadata says, always, never"""
+"""`load_policy(shield=...)`: the runtime config the file pins; the code's default runtime
+config (`RuntimeConfig()`); or none (`RuntimeConfig.off()`: the bare network)"""
 
 
 class PolicyLoadError(ValueError):
@@ -68,9 +72,13 @@ def paths_for(path: str | Path) -> tuple[Path, Path]:
 
 
 def save_policy(
-    path: str | Path, network: Any, extra_metadata: dict[str, Any] | None = None
+    path: str | Path,
+    network: Any,
+    runtime: RuntimeConfig,
+    extra_metadata: dict[str, Any] | None = None,
 ) -> Path:
-    """Write `network` (a QNetwork) and its metadata; returns the .pt path."""
+    """Write `network` (a QNetwork), the runtime config it flies behind and its metadata;
+    returns the .pt path."""
     import torch
 
     pt, js = paths_for(path)
@@ -78,6 +86,7 @@ def save_policy(
     meta = {
         **expected_metadata(),
         "network": network.shape_metadata(),
+        "runtime": runtime.to_dict(),
         "code_version": code_version(),
     }
     meta.update(extra_metadata or {})
@@ -93,75 +102,6 @@ def _close(a: Any, b: Any) -> bool:
     if isinstance(a, (int, float)) and isinstance(b, (int, float)):
         return math.isclose(a, b, rel_tol=1e-12, abs_tol=0.0)
     return a == b
-
-
-class Policy(CompensatesLatency):
-    """Greedy policy of a trained Q-network, on physical states [x, y, z, vx, vy, vz, m] (SI),
-    behind the braking shield (`pd_core.shield`) if given one (`load_policy` decides), and then
-    with the latency compensation it asks for (`act_rows`, `act_online`: `pd_core.latency`)."""
-
-    def __init__(
-        self, network: Any, metadata: dict[str, Any], shield: ShieldParams | None = None
-    ) -> None:
-        self.network = network.eval()
-        self.metadata = metadata
-        self.actions = ActionSpace(
-            tuple(metadata["n_per_axis"]),
-            ThrustLimits(tuple(metadata["thrust_min_n"]), tuple(metadata["thrust_max_n"])),
-        )
-        self._scale = np.asarray(metadata["state_scale"], dtype=float)
-        # numpy copy of the layers: one 7-vector is 3-5x faster here than through torch.
-        self._layers = [
-            (
-                m.weight.detach().numpy().astype(np.float64).T,
-                m.bias.detach().numpy().astype(np.float64),
-            )
-            for m in network.net
-            if hasattr(m, "weight")
-        ]
-        self._act_fn = np.tanh if metadata["network"]["activation"] == "tanh" else _relu
-        self._near_pad = bool(metadata["network"].get("near_pad", False))
-        self.shield = shield
-        self.shield_fired = 0
-        """steps on which the shield overrode the network (counted since loading)"""
-        self.latency = latency_for(shield)
-
-    def q_values(self, state: np.ndarray) -> np.ndarray:
-        """Action values (..., n_actions) of physical states (..., 7); ValueError if invalid."""
-        h = check_state(state) * self._scale
-        if self._near_pad:
-            h = np.concatenate([h, near_pad_features(h)], axis=-1)
-        for i, (w, b) in enumerate(self._layers):
-            h = h @ w + b
-            if i < len(self._layers) - 1:
-                h = self._act_fn(h)
-        return h
-
-    def act(self, state: np.ndarray) -> int:
-        """Greedy action index for one physical state (7,)."""
-        return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
-
-    def act_batch(
-        self, states: np.ndarray, vertical_thrust_scale: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Greedy actions (B,) for physical states (B, 7), shielded if the file says so (with the
-        measured vertical thrust fraction (B,), if given: `pd_core.shield.shield_actions`)."""
-        greedy = np.argmax(self.q_values(states), axis=-1)
-        if self.shield is None:
-            return greedy
-        shielded, fired = shield_actions(
-            greedy, states, self.actions, self.shield, vertical_thrust_scale
-        )
-        self.shield_fired += int(fired.sum())
-        return shielded
-
-    def thrust(self, action: int) -> np.ndarray:
-        """Thrust (3,) in N of an action index; ValueError if out of range."""
-        return self.actions.thrust(int(action))
-
-
-def _relu(x: np.ndarray) -> np.ndarray:
-    return np.maximum(x, 0.0)
 
 
 def _one_line(exc: BaseException, limit: int = 160) -> str:
@@ -197,30 +137,39 @@ def _load_weights(pt: Path) -> dict[str, Any]:
     return state
 
 
-def _weights_mismatch(state: dict[str, Any], want: dict[str, Any]) -> str | None:
+def _weights_mismatch(state: dict[str, Any], want: dict[str, tuple[int, ...]]) -> str | None:
     """None if `state` has exactly the tensors of `want` with their shapes, else what differs."""
     missing = sorted(set(want) - set(state))
     extra = sorted(set(state) - set(want))
     if missing or extra:
         return f"tensors missing {missing[:3]}, unexpected {extra[:3]}"
-    for name, t in want.items():
-        if tuple(state[name].shape) != tuple(t.shape):
+    for name, shape in want.items():
+        if tuple(state[name].shape) != shape:
             return (
                 f"{name} has shape {list(state[name].shape)} in the file, the network needs "
-                f"{list(t.shape)}"
+                f"{list(shape)}"
             )
     return None
 
 
-def load_policy(path: str | Path, shield: str = "file") -> Policy:
-    """Load `<name>.pt` + `<name>.json`; PolicyLoadError naming the file and what is wrong
-    (one line; never advice to lower the safety of the load). `shield` (SHIELD_MODES): fly
-    behind the braking shield if the metadata asks for it ("file"), always ("always": the file's
-    settings or the defaults), or never ("never": the bare network)."""
-    if shield not in SHIELD_MODES:
-        raise ValueError(f"shield must be one of {', '.join(SHIELD_MODES)}, got {shield!r}")
-    from pd_core.dqn.network import QNetwork  # imports torch: optional heavy dependency
+def _network_shapes(shape: dict[str, Any]) -> dict[str, tuple[int, ...]]:
+    """The tensor shapes of `pd_core.dqn.network.QNetwork` with this shape metadata."""
+    width = int(shape["n_inputs"]) + (6 if shape.get("near_pad") else 0)
+    out: dict[str, tuple[int, ...]] = {}
+    sizes = [*(int(h) for h in shape["hidden"]), int(shape["n_actions"])]
+    for i, h in enumerate(sizes):
+        out[f"net.{2 * i}.weight"] = (h, width)
+        out[f"net.{2 * i}.bias"] = (h,)
+        width = h
+    if shape["activation"] not in ("tanh", "relu"):
+        raise ValueError(f"activation must be tanh or relu, got {shape['activation']!r}")
+    return out
 
+
+def read_policy(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(metadata, tensors by name) of a policy file, checked against this code; PolicyLoadError
+    naming the file and what is wrong (one line; never advice to lower the safety of the
+    load)."""
     pt, js = paths_for(path)
     for f in (pt, js):
         if not f.is_file():
@@ -234,6 +183,11 @@ def load_policy(path: str | Path, shield: str = "file") -> Policy:
         raise PolicyLoadError(f"{js}: unreadable metadata: {_one_line(exc)}") from exc
     if not isinstance(meta, dict):
         raise PolicyLoadError(f"{js}: unreadable metadata: not a JSON object")
+    if meta.get("format_version") == 1:
+        raise PolicyLoadError(
+            f"{js}: format 1 does not pin its runtime config; write it out with "
+            f"`python -m pd_core.runtime.migrate {js}`"
+        )
     diffs = [
         f"{k}: file has {meta.get(k)!r}, code has {v!r}"
         for k, v in expected_metadata().items()
@@ -243,29 +197,49 @@ def load_policy(path: str | Path, shield: str = "file") -> Policy:
         raise PolicyLoadError(f"{js}: metadata does not match the code: " + "; ".join(diffs))
     try:
         shape = meta["network"]
-        net = QNetwork(
-            int(shape["n_inputs"]),
-            int(shape["n_actions"]),
-            tuple(shape["hidden"]),
-            shape["activation"],
-            near_pad=bool(shape.get("near_pad", False)),
-        )
+        want = _network_shapes(shape)
     except (KeyError, TypeError, ValueError) as exc:
-        raise PolicyLoadError(f"{js}: bad network description: {exc}") from exc
+        raise PolicyLoadError(f"{js}: bad network description: {_one_line(exc)}") from exc
     n_actions = int(np.prod(meta["n_per_axis"]))
-    if net.n_actions != n_actions or net.n_inputs != 7:
+    if int(shape["n_actions"]) != n_actions or int(shape["n_inputs"]) != 7:
         raise PolicyLoadError(
-            f"{js}: network has {net.n_inputs} inputs / {net.n_actions} outputs, "
+            f"{js}: network has {shape['n_inputs']} inputs / {shape['n_actions']} outputs, "
             f"need 7 / {n_actions}"
         )
     state = _load_weights(pt)
-    why = _weights_mismatch(state, net.state_dict())
+    why = _weights_mismatch(state, want)
     if why is not None:
         raise PolicyLoadError(f"{pt}: cannot load weights: {why} (network described in {js})")
-    net.load_state_dict(state)
+    return meta, state
+
+
+def load_policy(path: str | Path, shield: str = "file") -> Runtime:
+    """The `Runtime` that flies the policy file at `path` (`.pt`, `.json` or no suffix):
+    the network behind the runtime config the file pins (`shield="file"`), behind the code's
+    default config ("always"), or alone ("never"). PolicyLoadError in one line if the file is
+    missing, unreadable, hostile or does not match the code."""
+    if shield not in SHIELD_MODES:
+        raise ValueError(f"shield must be one of {', '.join(SHIELD_MODES)}, got {shield!r}")
+    meta, state = read_policy(path)
+    js = paths_for(path)[1]
     try:
-        filed = ShieldParams.from_dict(meta["shield"]) if meta.get("shield") else None
+        filed = RuntimeConfig.from_dict(meta.get("runtime"))
     except (AttributeError, TypeError, ValueError) as exc:
-        raise PolicyLoadError(f"{js}: bad shield settings: {_one_line(exc)}") from exc
-    chosen = {"file": filed, "always": filed or ShieldParams(), "never": None}[shield]
-    return Policy(net, meta, chosen)
+        raise PolicyLoadError(f"{js}: bad runtime config: {_one_line(exc)}") from exc
+    dtype = filed.network_dtype
+    config = {"file": filed, "always": RuntimeConfig(network_dtype=dtype)}.get(
+        shield, RuntimeConfig.off(dtype)
+    )
+    shape = meta["network"]
+    network = NumpyQNetwork(
+        {k: v.detach().cpu().numpy() for k, v in state.items()},
+        np.asarray(meta["state_scale"], dtype=float),
+        shape["activation"],
+        near_pad=bool(shape.get("near_pad", False)),
+        dtype=config.network_dtype,
+    )
+    space = ActionSpace(
+        tuple(meta["n_per_axis"]),
+        ThrustLimits(tuple(meta["thrust_min_n"]), tuple(meta["thrust_max_n"])),
+    )
+    return Runtime(network, config, space, name=Path(js).stem, metadata=meta)

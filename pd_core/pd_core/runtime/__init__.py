@@ -1,0 +1,19 @@
+"""What flies: a network (or controller) behind the runtime layer (`layer.Runtime`), its typed
+config (`config.RuntimeConfig`, pinned whole in the policy file), the per-step record
+(`decision.Decision`) and the policy files (`policy_file`). Imports numpy only; torch only reads a
+weights file in `load_policy`."""
+
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.decision import SOURCES, Decision
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import PolicyLoadError, load_policy, save_policy
+
+__all__ = [
+    "SOURCES",
+    "Decision",
+    "PolicyLoadError",
+    "Runtime",
+    "RuntimeConfig",
+    "load_policy",
+    "save_policy",
+]

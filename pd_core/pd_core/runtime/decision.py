@@ -1,0 +1,63 @@
+"""`Decision`: what the runtime layer did on one step, and who decided the action flown.
+
+The sources are numbered as in `pd_interfaces/msg/GuidanceStatus` (SOURCE_*), so a recorded bag
+and the node's statistics count the same thing: a step whose action differs from the network's
+own counts for the rule that changed it last; a rule that fired without changing the action does
+not count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+NETWORK, BRAKE, GUARD, HANDOVER = 0, 1, 2, 3
+SOURCES = ("network", "brake", "guard", "handover")
+"""name of each source, by number"""
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One step of one lander."""
+
+    action: int
+    """the action flown"""
+    proposed: int
+    """the network's (or controller's) own action on the state decided on"""
+    source: str
+    """who decided `action`: one of SOURCES"""
+    delay_steps: int
+    """actuation delay identified in flight (0.2 s steps)"""
+    thrust_gain_bound: float
+    """delivered / commanded vertical thrust the braking limit counts on (1: nominal)"""
+    nav_filter_engaged: bool
+    """the state decided on is the navigation filter's estimate (else the observation)"""
+
+    @property
+    def changed(self) -> bool:
+        """True where the runtime layer changed the network's action."""
+        return self.action != self.proposed
+
+
+@dataclass
+class Decisions:
+    """Decisions of a batch of landers (arrays over rows)."""
+
+    action: np.ndarray
+    proposed: np.ndarray
+    source: np.ndarray
+    """(B,) uint8 source numbers (NETWORK, BRAKE, GUARD, HANDOVER)"""
+    delay_steps: np.ndarray
+    thrust_gain_bound: np.ndarray
+    nav_filter_engaged: np.ndarray
+
+    def __getitem__(self, i: int) -> Decision:
+        return Decision(
+            int(self.action[i]),
+            int(self.proposed[i]),
+            SOURCES[int(self.source[i])],
+            int(self.delay_steps[i]),
+            float(self.thrust_gain_bound[i]),
+            bool(self.nav_filter_engaged[i]),
+        )

@@ -1,0 +1,63 @@
+"""The Q-network's forward pass in numpy: what flies needs no torch at decision time."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+
+import numpy as np
+
+from pd_core.state import check_state, near_pad_features
+
+_LAYER = re.compile(r"^net\.(\d+)\.(weight|bias)$")
+
+
+class NumpyQNetwork:
+    """Greedy actions of a fully connected Q-network (`pd_core.dqn.network.QNetwork`'s layout:
+    `net.<i>.weight` (out, in) and `net.<i>.bias`) on physical states (B, 7), SI: the inputs are
+    scaled by `state_scale` (Eqs. 20-21), with the near-pad features where the network has them,
+    and the layers run in `dtype`."""
+
+    def __init__(
+        self,
+        tensors: Mapping[str, np.ndarray],
+        state_scale: np.ndarray,
+        activation: str = "tanh",
+        near_pad: bool = False,
+        dtype: str = "float32",
+    ) -> None:
+        found = sorted(
+            {int(m.group(1)) for k in tensors if (m := _LAYER.match(k))},
+        )
+        if not found:
+            raise ValueError("no layers named net.<i>.weight / net.<i>.bias")
+        self.dtype = np.dtype(dtype)
+        self.layers = [
+            (
+                np.ascontiguousarray(np.asarray(tensors[f"net.{i}.weight"]).T, dtype=self.dtype),
+                np.asarray(tensors[f"net.{i}.bias"], dtype=self.dtype),
+            )
+            for i in found
+        ]
+        self.scale = np.asarray(state_scale, dtype=float)
+        self.near_pad = near_pad
+        self.activation = activation
+        self.n_actions = self.layers[-1][1].shape[0]
+
+    def q_values(self, states: np.ndarray) -> np.ndarray:
+        """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid."""
+        h = check_state(states).reshape(-1, 7) * self.scale
+        if self.near_pad:
+            h = np.concatenate([h, near_pad_features(h)], axis=-1)
+        h = h.astype(self.dtype)
+        last = len(self.layers) - 1
+        for i, (w, b) in enumerate(self.layers):
+            h = h @ w
+            h += b
+            if i < last:
+                h = np.tanh(h, out=h) if self.activation == "tanh" else np.maximum(h, 0.0, out=h)
+        return h
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        """Greedy actions (B,) of physical states (B, 7): the network alone."""
+        return np.argmax(self.q_values(states), axis=-1)
