@@ -9,6 +9,9 @@
 3. prints the touchdown state, fuel against the OCP's fuel and whether it landed, writes a PNG of
    the flight beside the OCP's trajectory, stops every process it started and exits 0
    (1 if the stack failed to fly the episode; landing or crashing both count as flown).
+
+It starts its own nodes on a domain of its own: a `--ros-args` section (as `ros2 run` or a launch
+file may add) is accepted and ignored, with a note.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from pd_bringup.bag import read_bag
 from pd_bringup.flight import FlightClient, FlightError
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
 from pd_core.plots import flight_vs_ocp
+from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.convert import final_state
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.process import ProcessError, Supervisor, executable
@@ -34,6 +38,8 @@ START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """pd_demo's own arguments; `--ros-args` sections are taken out first (UsageError if bad)."""
+    own, _ = split_ros_args("pd_demo", sys.argv[1:] if argv is None else argv)
     p = argparse.ArgumentParser(prog="pd_demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--fast", action="store_true", help="lockstep instead of the real 5 Hz")
     p.add_argument(
@@ -47,11 +53,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--out", type=Path, default=None, help="output folder (default out/demo-<time>)")
     p.add_argument("--method", default="", help="OCP method (default: pd_ocp_node's)")
-    return p.parse_args(argv)
+    return p.parse_args(own)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        args = parse_args(argv)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    if "--ros-args" in argv:
+        print("pd_demo: --ros-args ignored (the demo starts its own nodes)", flush=True)
     try:
         return run(args)
     except (FlightError, ProcessError) as exc:

@@ -1,6 +1,6 @@
 """pd_record: record topics to a rosbag2 bag (MCAP storage) with the `rosbags` library.
 
-    pd_record                                  # lander/state lander/thrust_cmd lander/episode
+    pd_record                                  # the stack's lander/* topics (names.LANDER_TOPICS)
     pd_record -o bags/run1 /lander/state /lander/thrust_cmd
     pd_record --duration 30 /lander/state
     pd_record --ros-args -r __ns:=/vehicle1     # the stack of namespace /vehicle1
@@ -10,11 +10,14 @@ stamped with their receive time (as `ros2 bag record` does). The subscription ca
 queue the bytes; a writer thread writes them and closes an MCAP chunk every `--flush` seconds, so
 a SIGKILL loses at most that much and the bag still opens (`pd_bringup.bag.read_bag`). Each
 publisher's sequence numbers are followed: a message that never reached the recorder (a gap) is
-counted and logged, and the exit status is then 1. Ctrl-C or SIGTERM stops recording within a
-second: what has arrived is written, the bag is closed and its metadata.yaml written. Each
-topic's offered QoS (from the ROS graph when its first message arrives) is stored in the bag.
-Relative topic names resolve in the recorder's namespace; topics of unknown type are looked up in
-the ROS graph.
+counted and logged, and the exit status is then 1. Ctrl-C or SIGTERM (at any moment, again
+during the stop, as `ros2 launch` sends SIGINT then SIGTERM) stops recording within a second:
+what has arrived is written, the bag is closed and its metadata.yaml written, exit status 0. Each
+topic's offered QoS (from the ROS graph when its first message arrives; for a topic never heard,
+when the stop begins, while the node still exists) is stored in the bag. Relative topic names
+resolve in the recorder's namespace; topics of unknown type are looked up in the ROS graph (a
+stop during that wait records the topics whose type is known). ROS arguments (`--ros-args ...`)
+may come anywhere on the command line.
 """
 
 from __future__ import annotations
@@ -38,14 +41,16 @@ from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos
 
 from pd_bringup.bag import bag_qos, flush_writer, message_class, open_writer, type_name, typestore
-from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_interfaces.msg import EpisodeResult, GuidanceStatus, LanderState, ThrustCommand
 from pd_ros_common import names, qos
+from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.gaps import SequenceGaps
 
 KNOWN_TYPES: dict[str, type] = {
     names.STATE_TOPIC: LanderState,
     names.COMMAND_TOPIC: ThrustCommand,
     names.EPISODE_TOPIC: EpisodeResult,
+    names.GUIDANCE_TOPIC: GuidanceStatus,
 }
 KNOWN_QOS = {names.EPISODE_TOPIC: qos.EPISODE_QOS}  # fallback when no publisher is seen
 STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most this long
@@ -54,12 +59,22 @@ STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most thi
 class Recorder(Node):
     """Raw subscriptions that only queue (topic index, receive time, bytes, message info)."""
 
-    def __init__(self, topics: list[str], sink: queue.SimpleQueue, discovery_s: float) -> None:
+    def __init__(
+        self,
+        topics: list[str],
+        sink: queue.SimpleQueue,
+        discovery_s: float,
+        stop: threading.Event | None = None,
+    ) -> None:
         super().__init__("pd_record")
+        self._stop = stop or threading.Event()
+        self._qos_lock = threading.Lock()
+        self._frozen_qos: dict[str, list[Qos]] | None = None
         known = {self.resolve_topic_name(t): cls for t, cls in KNOWN_TYPES.items()}
         self.known_qos = {self.resolve_topic_name(t): p for t, p in KNOWN_QOS.items()}
-        self.topics = [self.resolve_topic_name(t) for t in topics]
-        self.types = self._resolve_types(self.topics, known, discovery_s)
+        wanted = list(dict.fromkeys(self.resolve_topic_name(t) for t in topics))
+        self.types = self._resolve_types(wanted, known, discovery_s)
+        self.topics = [t for t in wanted if t in self.types]
         self.lost_events = 0
         for i, topic in enumerate(self.topics):
             self.create_subscription(
@@ -87,14 +102,22 @@ class Recorder(Node):
         self, topics: list[str], known: dict[str, type], timeout_s: float
     ) -> dict[str, type]:
         types = {t: known[t] for t in topics if t in known}
+        if len(types) < len(topics):
+            unknown = ", ".join(t for t in topics if t not in types)
+            self.get_logger().info(f"waiting up to {timeout_s:g} s for the type of {unknown}")
         deadline = time.monotonic() + timeout_s
         while len(types) < len(topics) and time.monotonic() < deadline:
             for name, kinds in self.get_topic_names_and_types():
                 if name in topics and name not in types:
                     types[name] = message_class(kinds[0])
-            time.sleep(0.1)
+            if self._stop.wait(0.1):
+                break
         missing = [t for t in topics if t not in types]
-        if missing:
+        if missing and self._stop.is_set():  # stopped while waiting: record what is known
+            self.get_logger().warning(
+                f"stopped before the type of {', '.join(missing)} was known: not recorded"
+            )
+        elif missing:
             raise SystemExit(
                 f"pd_record: type of {', '.join(missing)} unknown (no publisher seen within "
                 f"{timeout_s:g} s)"
@@ -102,9 +125,23 @@ class Recorder(Node):
         return types
 
     def offered_qos(self, topic: str) -> list[Qos]:
-        """QoS offered by the topic's publishers now (the stack's defaults if none is seen)."""
-        found = [bag_qos(i.qos_profile) for i in self.get_publishers_info_by_topic(topic)]
-        return found or [bag_qos(self.known_qos.get(topic, qos.LOOP_PUB_QOS))]
+        """QoS offered by the topic's publishers now (the stack's defaults if none is seen);
+        after `freeze_qos`, what it found then (the node may be gone: never asked again)."""
+        with self._qos_lock:
+            if self._frozen_qos is not None:
+                return self._frozen_qos.get(topic) or self._default_qos(topic)
+            found = [bag_qos(i.qos_profile) for i in self.get_publishers_info_by_topic(topic)]
+            return found or self._default_qos(topic)
+
+    def _default_qos(self, topic: str) -> list[Qos]:
+        return [bag_qos(self.known_qos.get(topic, qos.LOOP_PUB_QOS))]
+
+    def freeze_qos(self) -> None:
+        """Ask the graph one last time for every topic's QoS; call before `destroy_node` (the
+        writer still connects topics first heard in the drain, and the never-heard ones)."""
+        frozen = {t: self.offered_qos(t) for t in self.topics}
+        with self._qos_lock:
+            self._frozen_qos = frozen
 
 
 class BagWriter(threading.Thread):
@@ -192,9 +229,19 @@ class BagWriter(threading.Thread):
         return ", ".join(parts)
 
 
-def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
-    p = argparse.ArgumentParser(prog="pd_record", description=__doc__.split("\n\n")[0])
-    p.add_argument("topics", nargs="*", default=list(names.LANDER_TOPICS), help="topics to record")
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """The recorder's own arguments (`--ros-args` sections already taken out)."""
+    p = argparse.ArgumentParser(
+        prog="pd_record",
+        description=__doc__.split("\n\n")[0],
+        epilog="ROS arguments go in a --ros-args section, e.g. --ros-args -r __ns:=/vehicle1",
+    )
+    p.add_argument(
+        "topics",
+        nargs="*",
+        default=list(names.LANDER_TOPICS),
+        help=f"topics to record (default: {' '.join(names.LANDER_TOPICS)})",
+    )
     p.add_argument(
         "-o",
         "--output",
@@ -214,11 +261,16 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
         default=5.0,
         help="seconds to wait for publishers of topics whose type is not known",
     )
-    return p.parse_known_args(argv)
+    return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        own, ros_args = split_ros_args("pd_record", sys.argv[1:] if argv is None else argv)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    args = parse_args(own)
     bag = args.output or Path("bags") / datetime.now().strftime("pd_%Y%m%d-%H%M%S")
     if bag.exists():
         print(f"pd_record: {bag} exists already; choose another --output", file=sys.stderr)
@@ -228,15 +280,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     bag.parent.mkdir(parents=True, exist_ok=True)
     stop = threading.Event()
-    # Our own handlers: rclpy's would shut the context down before the bag is closed.
-    rclpy.init(args=["pd_record", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+    # Our own handlers, first: rclpy's would shut the context down before the bag is closed. A
+    # second signal (launch's SIGTERM after SIGINT) only sets the flag again.
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
+    rclpy.init(args=["pd_record", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     sink: queue.SimpleQueue = queue.SimpleQueue()
     node = writer = None
     executor = SingleThreadedExecutor()
     try:
-        node = Recorder(args.topics, sink, args.discovery_timeout)
+        node = Recorder(args.topics, sink, args.discovery_timeout, stop)
         writer = BagWriter(bag, node, sink, args.flush)
         writer.start()
         executor.add_node(node)
@@ -246,6 +299,7 @@ def main(argv: list[str] | None = None) -> int:
             executor.spin_once(timeout_sec=0.05)
     finally:
         if node is not None:
+            node.freeze_qos()  # the last graph query: the writer never touches the node again
             executor.remove_node(node)
             node.destroy_node()  # no more messages; what is queued gets written
         executor.shutdown(timeout_sec=0.2)
@@ -255,6 +309,10 @@ def main(argv: list[str] | None = None) -> int:
             writer.close()
             print(f"pd_record: closed {bag} ({writer.summary()})", flush=True)
         rclpy.try_shutdown()
+        # Stopped: the bag is closed. A later SIGINT/SIGTERM (launch's SIGTERM after SIGINT)
+        # must not kill the interpreter's teardown, which puts default handlers back.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
     if writer.error is not None:
         print(f"pd_record: writing {bag} failed: {writer.error!r}", file=sys.stderr)
         return 1

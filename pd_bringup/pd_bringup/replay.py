@@ -2,15 +2,19 @@
 
     pd_replay bags/run1
     pd_replay bags/run1 --topics /lander/state --rate 10
-    pd_replay bags/run1 --topics /lander/state --remap /lander/state:=/replay/state \
-        --wait-subscribers 1
+    pd_replay bags/run1 --topics /lander/state --remap /lander/state:=/replay/state
+    pd_replay bags/run1 --no-wait --ros-args -r __node:=pd_replay_2
 
 The raw CDR bytes of the bag are published unchanged, each topic with the QoS its recorded
 publishers offered (`offered_qos_profiles`: /lander/episode stays TRANSIENT_LOCAL, so a latched
 subscriber matches). A bag whose recorder was killed (no metadata.yaml, no MCAP footer) is
 recovered up to its last complete chunk; a bag that cannot be read at all is one line on stderr
-(exit status 2). `--wait-subscribers N` holds the first message until every replayed topic has
-N subscribers (with `--wait-timeout`), so nothing is published into the void.
+(exit status 2). The first message waits until every replayed topic has a subscriber
+(`--wait-subscribers N`: N of them), so a replay into a node started at the same time does not
+lose its first seconds. After `--wait-timeout` (30 s) the replay starts anyway, naming the topics
+nobody subscribes to; if no topic has a subscriber at all, it publishes nothing and exits 1.
+`--no-wait` (or `--wait-subscribers 0`) publishes at once. ROS arguments (`--ros-args ...`) may
+come anywhere on the command line.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import rclpy
 from rclpy.duration import Duration
@@ -26,10 +31,18 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from pd_bringup.bag import BagError, message_class, read_bag, replay_qos
+from pd_ros_common.cli import UsageError, split_ros_args
+
+WAIT_TIMEOUT_S = 30.0
 
 
-def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
-    p = argparse.ArgumentParser(prog="pd_replay", description=__doc__.split("\n\n")[0])
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """The replayer's own arguments (`--ros-args` sections already taken out)."""
+    p = argparse.ArgumentParser(
+        prog="pd_replay",
+        description=__doc__.split("\n\n")[0],
+        epilog="ROS arguments go in a --ros-args section, e.g. --ros-args -r __node:=replay2",
+    )
     p.add_argument("bag", type=Path, help="bag folder (rosbag2, MCAP or SQLite3)")
     p.add_argument("--topics", nargs="+", default=None, help="only these topics (default all)")
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1.0)")
@@ -43,12 +56,57 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     p.add_argument(
         "--wait-subscribers",
         type=int,
-        default=0,
+        default=1,
         metavar="N",
-        help="wait until each topic has N subscribers before the first message",
+        help="before the first message, wait until each topic has N subscribers (default 1)",
     )
-    p.add_argument("--wait-timeout", type=float, default=30.0, help="seconds for that wait")
-    return p.parse_known_args(argv)
+    p.add_argument(
+        "--no-wait",
+        dest="wait_subscribers",
+        action="store_const",
+        const=0,
+        help="publish at once, subscribers or not (= --wait-subscribers 0)",
+    )
+    p.add_argument(
+        "--wait-timeout",
+        type=float,
+        default=WAIT_TIMEOUT_S,
+        help=f"seconds for that wait (default {WAIT_TIMEOUT_S:g}); then it replays anyway",
+    )
+    return p.parse_args(argv)
+
+
+def wait_for_subscribers(pubs: dict[str, Any], wanted: int, timeout_s: float) -> bool:
+    """Wait until each publisher has `wanted` subscribers, at most `timeout_s`. False if none
+    has any then (nothing would hear the replay); topics short of `wanted` are named."""
+
+    def short() -> list[str]:
+        return [t for t, p in pubs.items() if p.get_subscription_count() < wanted]
+
+    print(
+        f"pd_replay: waiting for {wanted} subscriber(s) of {', '.join(short()) or 'no topic'} "
+        f"(up to {timeout_s:g} s; --no-wait to publish at once)",
+        flush=True,
+    )
+    deadline = time.monotonic() + timeout_s
+    while short() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    missing = short()
+    if missing and all(p.get_subscription_count() == 0 for p in pubs.values()):
+        print(
+            f"pd_replay: no subscriber to any replayed topic after {timeout_s:g} s; nothing "
+            "published (--no-wait to publish anyway)",
+            file=sys.stderr,
+            flush=True,
+        )
+        return False
+    if missing:
+        print(
+            f"pd_replay: fewer than {wanted} subscriber(s) after {timeout_s:g} s on "
+            f"{', '.join(missing)}; replaying anyway",
+            flush=True,
+        )
+    return True
 
 
 class Replayer(Node):
@@ -57,7 +115,12 @@ class Replayer(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        own, ros_args = split_ros_args("pd_replay", sys.argv[1:] if argv is None else argv)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    args = parse_args(own)
     if not args.rate > 0:
         print(f"pd_replay: --rate must be > 0, got {args.rate}", file=sys.stderr)
         return 2
@@ -93,13 +156,10 @@ def main(argv: list[str] | None = None) -> int:
             t: node.create_publisher(message_class(m), remap.get(t, t), replay_qos(offered))
             for t, (m, offered) in types.items()
         }
-        if args.wait_subscribers > 0:
-            deadline = time.monotonic() + args.wait_timeout
-            while any(p.get_subscription_count() < args.wait_subscribers for p in pubs.values()):
-                if time.monotonic() > deadline:
-                    print("pd_replay: subscribers did not appear in time", file=sys.stderr)
-                    return 1
-                time.sleep(0.05)
+        if args.wait_subscribers > 0 and not wait_for_subscribers(
+            pubs, args.wait_subscribers, args.wait_timeout
+        ):
+            return 1
         t0_wall = time.monotonic()
         t0_bag = None
         for topic, stamp, raw in bag.messages:
