@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
-from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
 from pd_ros_common import names, qos
+from pd_ros_common.clients import ocp_client, reset_client
 from pd_ros_common.convert import (
     from_vec3,
     ocp_request,
@@ -41,12 +41,8 @@ class FlightClient(RosSession):
         sub(LanderState, names.STATE_TOPIC, self.states.append, qos.LOOP_SUB_QOS)
         sub(ThrustCommand, names.COMMAND_TOPIC, self.commands.append, qos.LOOP_SUB_QOS)
         sub(EpisodeResult, names.EPISODE_TOPIC, self.results.append, qos.EPISODE_QOS)
-        self.reset_cli = self.node.create_client(
-            ResetEpisode, names.RESET_SERVICE, qos_profile=qos.SERVICE_QOS
-        )
-        self.ocp_cli = self.node.create_client(
-            ComputeTrajectory, names.OCP_SERVICE, qos_profile=qos.SERVICE_QOS
-        )
+        self.reset_cli = reset_client(self.node)
+        self.ocp_cli = ocp_client(self.node)  # the depth a burst of requests needs
 
     # ------------------------------------------------------------------ calls
     def call(self, client: Any, request: Any, timeout_s: float) -> Any:

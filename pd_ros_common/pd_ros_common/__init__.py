@@ -3,6 +3,8 @@
 `names` (topic and service names), `qos` (QoS profiles), `convert` (messages <-> numpy),
 `params` (typed, checked parameters), `node_help` (`--help` of a node), `run` (a node's
 `main`), `process` (child processes and their supervision), `domain` (a ROS domain of one's own),
-`session` (a node with its own context and executor, for tools and benches outside the stack).
+`session` (a node with its own context and executor, for tools and benches outside the stack),
+`clients` (service clients with the QoS a burst needs), `cli` (a tool's own arguments apart from
+its `--ros-args`).
 Importing the package imports nothing; each module imports what it needs.
 """

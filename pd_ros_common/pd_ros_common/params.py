@@ -5,12 +5,14 @@ to True) and, for values with a range, `name -> check(value) -> reason or None`.
 declares them all with dynamic typing (so a wrong type is ours to report, in one line, instead of
 rclpy's exception), checks every start-up value and registers the same check for later sets.
 Integers are accepted for floating-point parameters (`rate_hz:=10`), and integer lists for float
-lists; any other type mismatch is a `ParameterError` naming the parameter, the expected type and
-what was given.
+lists, and are stored as what the parameter is: `-p rate_hz:=10` (or `ros2 param set ... 10`)
+reads back as the double 10.0 on the parameter server, never as an integer. Any other type
+mismatch is a `ParameterError` naming the parameter, the expected type and what was given.
 """
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -53,7 +55,8 @@ def coerce(name: str, default: Any, value: Any) -> Any:
     elif isinstance(default, str):
         ok = isinstance(value, str)
     else:
-        ok = isinstance(value, (list, tuple)) and all(_number(v) for v in value)
+        # a list from a launch file or -p; array.array from a SetParameters request
+        ok = isinstance(value, (list, tuple, array)) and all(_number(v) for v in value)
     if not ok:
         raise ParameterError(
             f"parameter {name}: expected {_type_name(default)}, got {value!r} "
@@ -77,22 +80,52 @@ def check_value(
     return v
 
 
+def _stored_as_given(value: Any, coerced: Any) -> bool:
+    """True if `value` is stored with the type of its coerced form (10 for 10.0 is not)."""
+    if isinstance(coerced, list):
+        return all(type(v) is float for v in value)
+    return type(value) is type(coerced)
+
+
+def _descriptor(spec: Spec) -> ParameterDescriptor:
+    read_only = bool(spec[2]) if len(spec) > 2 else True
+    return ParameterDescriptor(description=spec[1], read_only=read_only, dynamic_typing=True)
+
+
 def declare(
     node: Node, parameters: Mapping[str, Spec], checks: Mapping[str, Check] | None = None
 ) -> dict[str, Any]:
-    """Declare, check and return every parameter's value; later sets pass the same check."""
+    """Declare, check and return every parameter's value; later sets pass the same check.
+
+    A value given as an integer for a double (`-p rate_hz:=10`) is declared again as the double
+    (the override is then ignored: it is the value), so the parameter server holds 10.0; a later
+    set of an integer is turned into the double before it is checked and stored."""
     checks = dict(checks or {})
     for name, spec in parameters.items():
-        read_only = bool(spec[2]) if len(spec) > 2 else True
-        node.declare_parameter(
-            name,
-            spec[0],
-            ParameterDescriptor(description=spec[1], read_only=read_only, dynamic_typing=True),
-        )
+        # Writable for now: a read-only parameter could not be declared again as its double.
+        writable = ParameterDescriptor(description=spec[1], read_only=False, dynamic_typing=True)
+        node.declare_parameter(name, spec[0], writable)
     values = {
         name: check_value(name, node.get_parameter(name).value, parameters, checks)
         for name in parameters
     }
+    for name, spec in parameters.items():
+        node.undeclare_parameter(name)
+        node.declare_parameter(name, values[name], _descriptor(spec), ignore_override=True)
+
+    def as_declared(params: list[Parameter]) -> list[Parameter]:
+        """Integers for doubles become doubles (what is not a number is left to on_set)."""
+        out = []
+        for p in params:
+            if p.name in parameters:
+                try:
+                    v = coerce(p.name, parameters[p.name][0], p.value)
+                except ParameterError:
+                    v = p.value
+                if not _stored_as_given(p.value, v):
+                    p = Parameter(p.name, value=v)
+            out.append(p)
+        return out
 
     def on_set(params: list[Parameter]) -> SetParametersResult:
         for p in params:
@@ -103,6 +136,7 @@ def declare(
                     return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
+    node.add_pre_set_parameters_callback(as_declared)
     node.add_on_set_parameters_callback(on_set)
     return values
 

@@ -70,3 +70,28 @@ def test_runtime_settings_change_the_layer_the_policy_flies(tmp_path):
         assert pol.stop() == 0, pol.log()
     finally:
         procs.stop_all()
+
+
+def test_integers_for_doubles_are_stored_as_doubles(tmp_path, make_node, spin_until):
+    """`-p rate_hz:=10` reads back from the parameter server as the double 10.0 (issue 33; it
+    kept the integer type), an integer parameter stays an integer."""
+    from rcl_interfaces.msg import ParameterType
+    from rcl_interfaces.srv import GetParameters
+
+    procs = ProcessSet(tmp_path)
+    try:
+        sim = procs.node(
+            "pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "seed": 4, "autostart": False}
+        )
+        assert sim.wait_log("real time at 10 Hz", START_S), sim.log()
+        get = make_node("param_probe").create_client(GetParameters, "/pd_sim_node/get_parameters")
+        assert spin_until(get.service_is_ready, 30.0)
+        future = get.call_async(GetParameters.Request(names=["rate_hz", "max_time_s", "seed"]))
+        assert spin_until(future.done, 30.0)
+        rate, max_time, seed = future.result().values
+        assert (rate.type, rate.double_value) == (ParameterType.PARAMETER_DOUBLE, 10.0)
+        assert (max_time.type, max_time.double_value) == (ParameterType.PARAMETER_DOUBLE, 100.0)
+        assert (seed.type, seed.integer_value) == (ParameterType.PARAMETER_INTEGER, 4)
+        assert sim.stop() == 0, sim.log()
+    finally:
+        procs.stop_all()

@@ -20,6 +20,7 @@ from rclpy.parameter import Parameter
 
 from pd_core.config import PAPER_TABLE4, TABLE1
 from pd_interfaces.srv import ComputeTrajectory
+from pd_ros_common.clients import ocp_client
 from pd_ros_common.convert import ocp_request
 from pd_ros_common.qos import SERVICE_QOS
 
@@ -170,6 +171,44 @@ def test_burst_of_50_requests_is_answered_in_full(client, spin_until):
     assert solved >= 1 and solved + busy == 50, [a.message for a in answers]
     for c in clients:
         node.destroy_client(c)
+
+
+def test_burst_of_50_from_one_client_of_pd_ros_common_answered_in_full(client, spin_until):
+    """One client sends 50 requests at once: `pd_ros_common.clients.ocp_client` (depth 200, as
+    the server) gets 50 answers (a default-QoS client, depth 10, lost 36 of 50)."""
+    node = client.node
+    cli = ocp_client(node)
+    assert cli.qos_profile.depth == SERVICE_QOS.depth == 200
+    assert spin_until(cli.service_is_ready, 60.0)
+    spin_until(lambda: False, 1.0)  # discovery settles both ways
+    futures = [cli.call_async(ocp_request(GOOD)) for _ in range(50)]
+    assert spin_until(lambda: all(f.done() for f in futures), 90.0), sum(f.done() for f in futures)
+    answers = [f.result() for f in futures]
+    solved = sum(a.success for a in answers)
+    busy = sum("busy" in a.message for a in answers)
+    print(f"burst of 50 from one client: {solved} solved, {busy} busy")
+    assert solved >= 1 and solved + busy == 50, [a.message for a in answers]
+    node.destroy_client(cli)
+
+
+def test_integer_set_for_a_double_is_stored_as_a_double(client, spin_until):
+    from rcl_interfaces.msg import ParameterType
+
+    node = client.node
+    setp = node.create_client(SetParameters, "/pd_ocp_node/set_parameters")
+    getp = node.create_client(GetParameters, "/pd_ocp_node/get_parameters")
+    assert spin_until(lambda: setp.service_is_ready() and getp.service_is_ready(), 10.0)
+    msg = Parameter("timeout_s", value=45).to_parameter_msg()
+    fut = setp.call_async(SetParameters.Request(parameters=[msg]))
+    assert spin_until(fut.done, 10.0) and fut.result().results[0].successful
+    fut = getp.call_async(GetParameters.Request(names=["timeout_s"]))
+    assert spin_until(fut.done, 10.0)
+    value = fut.result().values[0]
+    assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 45.0)
+    fut = setp.call_async(
+        SetParameters.Request(parameters=[Parameter("timeout_s", value=60.0).to_parameter_msg()])
+    )
+    assert spin_until(fut.done, 10.0) and fut.result().results[0].successful
 
 
 def test_parameters_checked_at_run_time_like_at_start_up(client, spin_until):
