@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 from pd_core.dispersions import load_scenarios
-from pd_core.env import PoweredDescentEnv, PoweredDescentVectorEnv
+from pd_core.env import PoweredDescentEnv
+from pd_core.vector_env import PoweredDescentVectorEnv
 
 
 def single_env_us_per_step(n_steps: int, seed: int) -> float:

@@ -29,9 +29,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pd_core.dispersions import NOMINAL  # noqa: E402
-from pd_core.env import make_vector_env  # noqa: E402
 from pd_core.experiments.campaign import load_actor, metrics, run_campaign  # noqa: E402
 from pd_core.experiments.evaluate import CHUNK_EPISODES, fly_episodes  # noqa: E402
+from pd_core.vector_env import make_vector_env  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pd_core.sim import Command, Simulator, percentiles_ms
+from pd_core.sim import Command, Simulator
+from pd_core.ticker import percentiles_ms
 from pd_interfaces.msg import LanderState, ThrustCommand
 from pd_policy_node.node import default_model_path
 from pd_ros_common import names

@@ -37,10 +37,9 @@ from pd_core.sim import (
     MAX_SIM_DELAY_STEPS,
     MISSING_COMMAND_MODES,
     THRUST_SCALE_RANGE,
-    FixedRateTicker,
     Simulator,
-    percentiles_ms,
 )
+from pd_core.ticker import FixedRateTicker, percentiles_ms
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import names, params, qos

@@ -6,8 +6,9 @@ from gymnasium.utils.env_checker import check_env
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST, STATE_SCALE, TABLE3
-from pd_core.env import PoweredDescentEnv, PoweredDescentVectorEnv, Status, make_vector_env
+from pd_core.env import PoweredDescentEnv, Status
 from pd_core.state import check_state
+from pd_core.vector_env import PoweredDescentVectorEnv, make_vector_env
 
 START = [600.0, -200.0, 2500.0, -40.0, 10.0, -80.0, 2000.0]
 

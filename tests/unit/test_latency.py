@@ -14,7 +14,6 @@ import pytest
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.dispersions import Dispersions, load_scenarios
-from pd_core.env import make_vector_env
 from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RuntimeConfig
 from pd_core.runtime.latency import (
@@ -25,6 +24,7 @@ from pd_core.runtime.latency import (
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import PolicyLoadError, load_policy
 from pd_core.teachers.registry import make_controller
+from pd_core.vector_env import make_vector_env
 
 NAV_OFF = NavFilterConfig(enabled=False)
 SHORTFALL_SD = LatencyConfig().shortfall_sd

@@ -11,14 +11,8 @@ import pytest
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.env import PoweredDescentEnv, Status
-from pd_core.sim import (
-    Command,
-    FixedRateTicker,
-    Simulator,
-    check_command,
-    describe_end,
-    percentiles_ms,
-)
+from pd_core.sim import Command, Simulator, check_command, describe_end
+from pd_core.ticker import FixedRateTicker, percentiles_ms
 
 TABLE = DEFAULT_ACTIONS.table_n
 HOVER = int(DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 2])))  # 0, 0, 13 kN

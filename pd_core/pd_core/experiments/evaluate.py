@@ -2,7 +2,8 @@
 
 Episode i of an evaluation with seed s flies exactly what `PoweredDescentEnv` seeded with s + i
 flies (the vector env's guarantee), with disturbances on, greedy actions, the same env factory as
-training (`pd_core.env.make_vector_env`), optionally under dispersions (`pd_core.dispersions`).
+training (`pd_core.vector_env.make_vector_env`), optionally under dispersions
+(`pd_core.dispersions`).
 Nothing here imports torch: an actor is anything with `act_batch(states (B, 7)) -> (B,)`.
 """
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from pd_core.config import MAX_EPISODE_TIME_S, PAPER_TABLE7, REWARD, RewardConfig
 from pd_core.dispersions import Dispersions
-from pd_core.env import PoweredDescentVectorEnv, make_vector_env
+from pd_core.vector_env import PoweredDescentVectorEnv, make_vector_env
 
 QUANTITIES = ("norm_ij_position_m", "norm_ij_velocity_mps", "k_velocity_mps", "fuel_kg")
 LABELS = {

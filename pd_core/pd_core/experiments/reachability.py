@@ -63,9 +63,9 @@ from pd_core.config import (
 )
 from pd_core.dispersions import Dispersions, EpisodeDraws
 from pd_core.dynamics import step
-from pd_core.env import make_vector_env
 from pd_core.experiments.evaluate import Rollouts
 from pd_core.reward import landed
+from pd_core.vector_env import make_vector_env
 
 Status = Literal["reachable", "out-of-reach", "undecided"]
 # ours: plans that end at rest this high above the pad (a fuel optimum may dip a few metres below
