@@ -27,6 +27,7 @@ import numpy as np
 
 from pd_bringup.bag import read_bag
 from pd_bringup.flight import FlightClient, FlightError
+from pd_bringup.guidance import bag_counts, node_counts
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
 from pd_core.plots import flight_vs_ocp
 from pd_ros_common.cli import UsageError, split_ros_args
@@ -122,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     for topic, _, _ in recorded.messages:
         counts[topic] += 1
     print(f"  bag {bag}: " + ", ".join(f"{t} {n}" for t, n in counts.items()))
+    print_guidance(bag, sup)
     title = (
         f"seed {args.seed}, {args.controller}, {mode}: "
         f"{'landed' if result.landed else 'not landed'}, fuel {result.fuel:.1f} kg"
@@ -139,6 +141,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"  plot {png}")
     print("pd_demo: done, every process stopped", flush=True)
     return 0
+
+
+def print_guidance(bag: Path, sup: Supervisor) -> None:
+    """Who decided the commands, from the bag, beside the policy node's own count."""
+    in_bag = bag_counts(bag)
+    policy = next((c for c in sup.children if c.name == "pd_policy_node"), None)
+    in_log = node_counts(policy.log()) if policy is not None else None
+    said = ", ".join(f"{k} {v}" for k, v in in_bag.items())
+    agree = "equal to" if in_log == in_bag else f"NOT equal to ({in_log})"
+    print(f"  who decided (guidance_status in the bag): {said}; {agree} the policy node's count")
 
 
 def _fmt(v: np.ndarray, nd: int = 2) -> str:

@@ -139,6 +139,7 @@ def load_controller(
         except ValueError as exc:
             raise PolicyLoadError(str(exc)) from None
         runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
+        what += f", runtime settings {settings}"
     layer = "no runtime layer" if runtime.config.is_off else "runtime layer on"
     return runtime, f"{what}, {layer}, config {config_hash(runtime.config)})"
 

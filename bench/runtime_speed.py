@@ -1,0 +1,103 @@
+"""What a decision costs: the shipped file behind its runtime layer beside the bare network and
+ZEM/ZEV, per decision and per campaign, side by side in one run, with the ratios.
+
+1. One decision of one lander (`Runtime.step`, the policy node's call) with the full layer,
+   median and p99 over a flown nominal episode replayed many times, beside a bare float32
+   forward of the same network (`NumpyQNetwork.act_batch` on one state) and ZEM/ZEV.
+2. A one-process nominal campaign (`pd_core.experiments.campaign.run_campaign`, 1024 landers
+   per batch) in episodes/min: the shipped file, its bare network, ZEM/ZEV.
+
+BLAS and numba are held to one thread: "one process" is one core.
+
+    python bench/runtime_speed.py [--episodes 4096] [--decisions 5000]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one process = one core
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from pd_core.dispersions import NOMINAL  # noqa: E402
+from pd_core.experiments.campaign import metrics, run_campaign  # noqa: E402
+from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.runtime import RuntimeConfig, load_policy  # noqa: E402
+from pd_core.runtime.layer import Runtime  # noqa: E402
+from pd_core.teachers.registry import make_controller  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "models" / "pd_dqn_robust.pt"
+
+
+def per_decision_us(call, states: np.ndarray, repeats: int) -> np.ndarray:
+    """Microseconds of each call(state) over `states`, flown `repeats` times in order."""
+    out = []
+    for _ in range(repeats):
+        for s in states:
+            t0 = time.perf_counter()
+            call(s)
+            out.append(time.perf_counter() - t0)
+    return 1e6 * np.array(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=4096, help="campaign episodes per agent")
+    ap.add_argument("--decisions", type=int, default=5000, help="timed single decisions")
+    args = ap.parse_args()
+
+    rt = load_policy(SHIPPED)
+    path = rollout(rt, 1, 0, keep_trajectories=1).trajectories[0][:-1]  # one nominal flight
+    repeats = max(1, args.decisions // len(path))
+    zz = Runtime(make_controller("zemzev-vernier"), RuntimeConfig.off())
+
+    def layer_step(s: np.ndarray) -> None:
+        rt.step(s)
+
+    def episode_start() -> None:
+        rt.begin_episode()
+
+    episode_start()
+    per_decision_us(layer_step, path[:20], 1)  # warm-up (and any compilation)
+    timings = {}
+    for name, call in (
+        ("shipped file, full runtime layer (Runtime.step)", layer_step),
+        ("bare float32 forward (NumpyQNetwork, 1 state)", lambda s: rt.actor.act_batch(s[None])),
+        ("ZEM/ZEV-vernier (1 state)", lambda s: zz.step(s)),
+    ):
+        episode_start()
+        timings[name] = per_decision_us(call, path, repeats)
+    base = np.median(timings["bare float32 forward (NumpyQNetwork, 1 state)"])
+    print(f"one decision, {len(next(iter(timings.values())))} calls each (one core):")
+    print(f"  {'':<52}{'median us':>10}{'p99 us':>10}{'x bare':>9}")
+    for name, t in timings.items():
+        med = np.median(t)
+        print(f"  {name:<52}{med:>10.1f}{np.percentile(t, 99):>10.1f}{med / base:>9.1f}")
+
+    print(f"\none-process nominal campaign, {args.episodes} episodes per agent:")
+    print(f"  {'':<52}{'episodes/min':>13}{'success %':>11}{'x ZEM/ZEV':>11}")
+    rates = {}
+    for name, spec in (
+        ("shipped file behind its runtime layer", str(SHIPPED)),
+        ("its bare network", f"bare:{SHIPPED}"),
+        ("ZEM/ZEV-vernier", "controller:zemzev-vernier"),
+    ):
+        t0 = time.perf_counter()
+        flown = run_campaign({"a": spec}, [NOMINAL], args.episodes, seed=0)
+        dt = time.perf_counter() - t0
+        rates[name] = (60.0 * args.episodes / dt, metrics(flown["nominal"]["a"])["success_rate"])
+    zz_rate = rates["ZEM/ZEV-vernier"][0]
+    for name, (rate, ok) in rates.items():
+        print(f"  {name:<52}{rate:>13,.0f}{100 * ok:>11.2f}{rate / zz_rate:>11.2f}")
+
+
+if __name__ == "__main__":
+    main()
