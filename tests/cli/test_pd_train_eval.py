@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import pytest
 
@@ -122,6 +124,17 @@ def test_eval_controller_text_report(capsys):
     assert pd_eval.main(["--controller", "zemzev", "--episodes", "20", "--seed", "2"]) == 0
     out = capsys.readouterr().out
     assert "Norm ij-position (m)" in out and "6.04" in out and "success rate" in out
+
+
+def test_eval_of_a_policy_file_says_how_often_its_runtime_layer_changed_the_network(capsys):
+    """The report counts the actions the layer changed, per rule, over every decision flown."""
+    shipped = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt"
+    assert pd_eval.main([str(shipped), "--episodes", "10", "--seed", "3"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("runtime layer: changed "))
+    changed, steps = (int(v) for v in re.findall(r"changed (\d+) of (\d+) actions", line)[0])
+    rules = [int(v) for v in re.findall(r"(?:brake|guard|handover) (\d+)", line)]
+    assert 10 * 150 < steps < 10 * 400 and sum(rules) == changed and 0 < changed < steps
 
 
 def test_eval_refuses_mismatched_model(tmp_path, capsys):
