@@ -2,8 +2,10 @@
 
 Examples:
     pd-train --preset paper-agent1 --seed 1
+    pd-train --preset paper-agent1 --seed 1 --num-envs 16 --updates-per-step 16  # paper's ratio
     pd-train --preset best --seed 1 --max-minutes 55
     pd-train --resume runs/best__1__20260101-120000 --max-minutes 80
+    pd-train --resume runs/best__1__20260101-120000 --device cpu  # a GPU run, on a CPU
 """
 
 from __future__ import annotations
@@ -21,6 +23,13 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pd-train",
         description="Train a DQN powered-descent policy. Presets: " + ", ".join(sorted(PRESETS)),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        epilog=(
+            "The paper's ratio is one gradient update per env transition: with --num-envs N "
+            "give --updates-per-step N (the N updates of a step run together after it). "
+            "--device auto trains on the GPU when torch sees one (replay memories on the GPU, "
+            "the whole update one CUDA graph) and on the CPU otherwise; the run's config.json "
+            "and policy metadata record the device used."
+        ),
     )
     add_arguments(p)
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")

@@ -55,20 +55,39 @@ def large_margin_loss(q: torch.Tensor, actions: torch.Tensor, margin: float) -> 
 
 
 class DQNAgent:
-    """Online network, target network and optimiser; `update` does one gradient step."""
+    """Online network, target network and optimiser; `update` does one gradient step.
 
-    def __init__(self, cfg: TrainConfig, n_inputs: int = 7, n_actions: int = 147) -> None:
+    `device` is where both networks and the optimiser state live; `capturable` makes the
+    optimiser capturable in a CUDA graph (`pd_core.dqn.device.DeviceUpdate`, cuda only). The
+    networks are initialised on the CPU and then moved, so a seed gives the same initial
+    weights on every device.
+    """
+
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        n_inputs: int = 7,
+        n_actions: int = 147,
+        device: torch.device | str = "cpu",
+        capturable: bool = False,
+    ) -> None:
         self.cfg = cfg
+        self.device = torch.device(device)
+        self.capturable = capturable
         self.q = QNetwork(
             n_inputs, n_actions, tuple(cfg.hidden), cfg.activation, near_pad=cfg.near_pad
-        )
+        ).to(self.device)
         self.q_target = copy.deepcopy(self.q)
         for p in self.q_target.parameters():
             p.requires_grad_(False)
+        # capturable only where asked: the CPU path's optimiser is the one it always had
+        extra: dict[str, Any] = {"capturable": True} if capturable else {}
         if cfg.optimizer == "rmsprop":
-            self.opt: torch.optim.Optimizer = torch.optim.RMSprop(self.q.parameters(), lr=cfg.lr)
+            self.opt: torch.optim.Optimizer = torch.optim.RMSprop(
+                self.q.parameters(), lr=cfg.lr, **extra
+            )
         elif cfg.optimizer == "adam":
-            self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr, eps=1.5e-4)
+            self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr, eps=1.5e-4, **extra)
         else:
             raise ValueError(f"optimizer must be rmsprop or adam, got {cfg.optimizer!r}")
         if cfg.loss not in ("mse", "huber"):
@@ -77,7 +96,7 @@ class DQNAgent:
 
     def init_input_normalisation(self, obs: np.ndarray) -> None:
         """First layer W x + b -> W (x - mu) / sigma + b, for both networks (same shape)."""
-        x = self.q.inputs(torch.as_tensor(obs, dtype=torch.float32))
+        x = self.q.inputs(torch.as_tensor(obs, dtype=torch.float32, device=self.device))
         mu, sigma = x.mean(0), x.std(0).clamp_min(1e-3)
         first = self.q.net[0]
         with torch.no_grad():
@@ -89,50 +108,74 @@ class DQNAgent:
     def act(self, obs: np.ndarray, epsilon: float, rng: np.random.Generator) -> np.ndarray:
         """Epsilon-greedy actions (B,) for scaled observations (B, 7)."""
         with torch.no_grad():
-            greedy = self.q(torch.as_tensor(obs, dtype=torch.float32)).argmax(dim=1).numpy()
+            x = torch.as_tensor(obs, dtype=torch.float32, device=self.device)
+            greedy = self.q(x).argmax(dim=1).cpu().numpy()
         if epsilon <= 0.0:
             return greedy
         explore = rng.random(len(greedy)) < epsilon
         rand = rng.integers(0, self.q.n_actions, size=len(greedy))
         return np.where(explore, rand, greedy)
 
-    def loss(self, batch: ReplaySample) -> tuple[torch.Tensor, dict[str, float]]:
+    def loss_terms(
+        self,
+        obs: torch.Tensor,
+        actions: torch.Tensor,
+        rewards: torch.Tensor,
+        next_obs: torch.Tensor,
+        discounts: torch.Tensor,
+        demo_rows: torch.Tensor | slice | None,
+    ) -> dict[str, torch.Tensor]:
+        """The loss and its parts as tensors, without reading any back to the host (so a CUDA
+        graph can hold it): td_loss, margin_loss (only with `demo_rows`, the rows the
+        large-margin loss sees), loss (the one to minimise) and q_mean."""
         cfg = self.cfg
-        q_all = self.q(batch.obs)
-        q = q_all.gather(1, batch.actions[:, None]).squeeze(1)
+        q_all = self.q(obs)
+        q = q_all.gather(1, actions[:, None]).squeeze(1)
         target = td_targets(
-            self.q_target,
-            self.q if cfg.double_dqn else None,
+            self.q_target, self.q if cfg.double_dqn else None, rewards, next_obs, discounts
+        )
+        td = F.mse_loss(q, target) if cfg.loss == "mse" else F.smooth_l1_loss(q, target)
+        out = {"td_loss": td}
+        total = td
+        if demo_rows is not None:
+            lm = large_margin_loss(q_all[demo_rows], actions[demo_rows], cfg.margin_value)
+            total = total + cfg.margin * lm
+            out["margin_loss"] = lm
+        out["loss"] = total
+        out["q_mean"] = q.detach().mean()
+        return out
+
+    def loss(self, batch: ReplaySample) -> tuple[torch.Tensor, dict[str, float]]:
+        margin = self.cfg.margin > 0.0 and bool(batch.demo.any())
+        terms = self.loss_terms(
+            batch.obs,
+            batch.actions,
             batch.rewards,
             batch.next_obs,
             batch.discounts,
+            batch.demo if margin else None,
         )
-        if cfg.loss == "mse":
-            td = F.mse_loss(q, target)
-        else:
-            td = F.smooth_l1_loss(q, target)
-        total = td
-        info = {"td_loss": float(td.detach())}
-        if cfg.margin > 0.0 and bool(batch.demo.any()):
-            d = batch.demo
-            lm = large_margin_loss(q_all[d], batch.actions[d], cfg.margin_value)
-            total = total + cfg.margin * lm
-            info["margin_loss"] = float(lm.detach())
-        info["loss"] = float(total.detach())
-        info["q_mean"] = float(q.detach().mean())
-        return total, info
+        return terms["loss"], {k: float(v.detach()) for k, v in terms.items()}
 
-    def update(self, batch: ReplaySample) -> dict[str, float]:
-        """One gradient step; copies the target network every `target_period` updates."""
-        loss, info = self.loss(batch)
+    def gradient_step(self, loss: torch.Tensor) -> None:
+        """Backward and optimiser step (with the gradient clip), no host sync."""
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         if self.cfg.grad_clip > 0.0:
             torch.nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
         self.opt.step()
+
+    def count_update(self) -> None:
+        """Count one update; copies the target network every `target_period` updates."""
         self.updates += 1
         if self.updates % self.cfg.target_period == 0:
             self.sync_target()
+
+    def update(self, batch: ReplaySample) -> dict[str, float]:
+        """One gradient step; copies the target network every `target_period` updates."""
+        loss, info = self.loss(batch)
+        self.gradient_step(loss)
+        self.count_update()
         return info
 
     def sync_target(self) -> None:
@@ -150,7 +193,20 @@ class DQNAgent:
         self.q.load_state_dict(d["q"])
         self.q_target.load_state_dict(d["q_target"])
         self.opt.load_state_dict(d["opt"])
+        self._own_optimiser_flags()
         self.updates = int(d["updates"])
+
+    def _own_optimiser_flags(self) -> None:
+        """A loaded optimiser state brings its saver's `capturable` (a CUDA-graph run's, or a CPU
+        run's): keep this agent's own, with each step count where that wants it (a capturable
+        optimiser counts on the device, the others on the CPU)."""
+        for group in self.opt.param_groups:
+            group["capturable"] = self.capturable
+        where = self.device if self.capturable else torch.device("cpu")
+        for st in self.opt.state.values():
+            step = st.get("step")
+            if isinstance(step, torch.Tensor) and step.device != where:
+                st["step"] = step.to(where, torch.float32)
 
 
 def concat_samples(a: ReplaySample, b: ReplaySample | None) -> ReplaySample:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from pd_core.policy import code_version, expected_metadata
+from pd_core.runtime.policy_file import code_version, expected_metadata
 
 CHECKPOINT = "checkpoint.pt"
 

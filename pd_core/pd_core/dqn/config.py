@@ -34,7 +34,9 @@ class TrainConfig:
     num_envs: int = 1
     """batched environments stepped together (the paper: 1)"""
     updates_per_step: float = 1.0
-    """gradient updates per (batched) env step; fractions accumulate"""
+    """gradient updates per batched env step, i.e. per num_envs env transitions; fractions
+    accumulate. The paper's ratio, one update per env transition, is updates_per_step = num_envs
+    (e.g. --num-envs 16 --updates-per-step 16: the updates of a step run together after it)"""
     learning_starts: int = 1000
     """agent transitions stored before the first gradient update"""
     hidden: tuple[int, ...] = DQN_PAPER.hidden
@@ -69,7 +71,8 @@ class TrainConfig:
     batch_demo: int = DQN_PAPER.batch_demo
     """k_demo: demonstration transitions per minibatch (0: no demonstrations)"""
     target_period: int = DQN_PAPER.target_period_steps
-    """n_T: the target network is copied every this many gradient updates (= env steps at 1/1)"""
+    """n_T: the target network is copied every this many gradient updates (= env transitions at
+    the paper's ratio, one update per transition)"""
     buffer_size: int = 1_000_000
     """capacity of the agent replay memory (FIFO); the demonstration memory is never overwritten"""
     double_dqn: bool = False
@@ -83,9 +86,10 @@ class TrainConfig:
     margin_value: float = 0.8
     """margin l(a_E, a) for a != a_E in the large-margin loss"""
     demos: str = "data/demos_7x7x3.npz"
-    """demonstration file (pd_core.demos format; empty: none)"""
+    """demonstration file (pd_core.demonstrations.open_loop format; empty: none)"""
     controller_demo_episodes: int = 0
-    """episodes flown by the reference controller (pd_core.controllers) added as demonstrations"""
+    """episodes flown by the reference controller (pd_core.teachers.zemzev) added as
+    demonstrations"""
     controller: str = "zemzev"
     """controller(s) flying the controller demonstrations, under `dispersions`: zemzev, the MPC
     teacher mpc-fuel / mpc-energy (flown on every core), or a comma list sharing the episodes"""
@@ -100,7 +104,7 @@ class TrainConfig:
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
     shield: bool = False
-    """the policy flies behind the braking shield of pd_core.shield: the periodic evaluations
+    """the policy flies behind the braking shield of pd_core.runtime.rules: the periodic evaluations
     (hence best.pt) and the recovery search fly with it, and the saved policies' metadata asks
     for it. Training episodes stay unshielded: shielding them left the overridden actions'
     Q-values untrained and the median fuel drifted from 338 to 450 kg in 13 min"""
@@ -140,6 +144,10 @@ class TrainConfig:
     """run folder or checkpoint.pt to resume: networks, optimiser, replay memories, schedules"""
     torch_threads: int = 1
     """torch CPU threads (1 keeps runs repeatable and leaves the other core free)"""
+    device: str = "auto"
+    """where the networks train: cpu, cuda, or auto (cuda when torch sees one, else cpu). On cuda
+    the replay memories live and sample on the GPU and the whole update step is one CUDA graph;
+    cpu keeps numpy replay memories and resumes bit for bit"""
     progress: bool = True
     """show a tqdm progress bar"""
 
@@ -209,6 +217,7 @@ PRESETS["robust"] = {
 
 
 SCENARIO_SAMPLING = ("uniform", "failures")
+DEVICES = ("auto", "cpu", "cuda")
 _POSITIVE = ("episodes", "num_envs", "batch_agent", "gamma", "lr", "n_step", "buffer_size")
 _NON_NEGATIVE = (
     "max_minutes",
@@ -259,6 +268,8 @@ def check_config(cfg: TrainConfig) -> None:
             "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
             f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
         )
+    if cfg.device not in DEVICES:
+        raise ValueError(f"device must be one of {DEVICES}, got {cfg.device!r}")
     if not cfg.hidden or min(cfg.hidden) < 1:
         raise ValueError(f"hidden must be positive layer widths, got {cfg.hidden!r}")
 
@@ -313,6 +324,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             parser.add_argument(flag, default="paper-agent1", choices=sorted(PRESETS), help=help_)
         elif f.type in ("bool", bool):
             parser.add_argument(flag, type=_parse_bool, nargs="?", const=True, help=help_)
+        elif f.name == "device":
+            parser.add_argument(flag, choices=DEVICES, help=help_)
         elif f.name == "hidden":
             parser.add_argument(flag, type=_parse_tuple, help=help_ + "; e.g. 300,200,300")
         else:
@@ -330,6 +343,7 @@ def from_args(ns: argparse.Namespace) -> TrainConfig:
 
 
 __all__ = [
+    "DEVICES",
     "PRESETS",
     "TrainConfig",
     "add_arguments",

@@ -7,6 +7,7 @@ policies best.pt/.json (best periodic evaluation) and final.pt/.json.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import time
@@ -21,8 +22,7 @@ import torch
 from tqdm import tqdm
 
 from pd_core.config import REWARD, STATE_SCALE, RewardConfig
-from pd_core.controllers import make_controller
-from pd_core.dqn.actor import NetActor
+from pd_core.dqn.actor import TorchGreedy, network_kwargs
 from pd_core.dqn.agent import DQNAgent, concat_samples, epsilon_at
 from pd_core.dqn.checkpoint import (
     checkpoint_metadata,
@@ -32,22 +32,28 @@ from pd_core.dqn.checkpoint import (
     write_checkpoint,
 )
 from pd_core.dqn.config import TrainConfig, check_config
-from pd_core.dqn.demonstrations import build_demo_memory
+from pd_core.dqn.demo_memory import build_demo_memory
+from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
+from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
 from pd_core.dqn.run_log import CsvLog, RunLogs, run_folder
 from pd_core.dqn.scenario_outcomes import ScenarioOutcomes
-from pd_core.env import make_vector_env
-from pd_core.evaluate import rollout, summarise
+from pd_core.experiments.evaluate import rollout, summarise
 from pd_core.plots import training_curves
-from pd_core.policy import code_version, load_policy, save_policy
-from pd_core.shield import ShieldParams
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
+from pd_core.runtime.policy_file import code_version, read_policy, save_policy
 from pd_core.state import scale_state
+from pd_core.teachers.registry import make_controller
+from pd_core.vector_env import make_vector_env
 
 EvalCallback = Callable[[dict[str, float]], None]
 METRICS_PERIOD_S = 10.0
 """metrics.csv rows, log flushes and progress-bar updates this often"""
 PRETRAIN_LOG_EVERY = 1000
 """pre-training updates between metrics rows (and eval/checkpoint checks)"""
+REPLAY_PATHS = ("host", "device", "device-numpy")
+"""where the replay memories live and draw minibatches (`Trainer`'s `replay`)"""
 
 
 def training_reward(cfg: TrainConfig) -> RewardConfig:
@@ -85,6 +91,12 @@ class Trainer:
     `on_eval` is called with every periodic evaluation (plus wall_s, updates, episodes): how a
     sweep reports to Ray Tune. `restore` (a checkpoint's state) continues a run exactly; use
     `Trainer.resume`.
+
+    `replay` says where the replay memories live and draw minibatches: `host` (numpy memories and
+    the run's numpy generator: the CPU path, bit-for-bit resumable), `device` (torch tensors on
+    `cfg.device`, indices from a torch generator there, the step a CUDA graph on cuda:
+    `pd_core.dqn.device`) or `device-numpy` (the device code with the host path's index draws,
+    which reproduces a `host` run on the CPU: for tests). Default: device on cuda, else host.
     """
 
     def __init__(
@@ -94,18 +106,35 @@ class Trainer:
         quiet: bool = False,
         on_eval: EvalCallback | None = None,
         restore: dict[str, Any] | None = None,
+        replay: str | None = None,
     ) -> None:
         check_config(cfg)
         t_start = time.perf_counter()  # max_minutes counts the demonstrations built below
         self.cfg = cfg
         self.quiet = quiet
         self.on_eval = on_eval
+        self.device = resolve_device(cfg.device)
+        self.replay_path = replay or ("device" if self.device.type == "cuda" else "host")
+        if self.replay_path not in REPLAY_PATHS:
+            raise ValueError(f"replay must be one of {REPLAY_PATHS}, got {self.replay_path!r}")
+        on_device = self.replay_path != "host"
+        self.cuda_graph = on_device and self.device.type == "cuda"
         torch.set_num_threads(max(cfg.torch_threads, 1))
         torch.manual_seed(cfg.seed)
         self.rng = np.random.default_rng(cfg.seed)
         self.reward_cfg = training_reward(cfg)
-        self.agent = DQNAgent(cfg)
-        self.replay = ReplayMemory(cfg.buffer_size)
+        self.agent = DQNAgent(cfg, device=self.device, capturable=self.cuda_graph)
+        self.replay: ReplayMemory | DeviceReplay = (
+            DeviceReplay(cfg.buffer_size, device=self.device)
+            if on_device
+            else ReplayMemory(cfg.buffer_size)
+        )
+        self.replay_gen: torch.Generator | None = None
+        if self.replay_path == "device":
+            self.replay_gen = torch.Generator(device=self.device)
+            self.replay_gen.manual_seed(cfg.seed)
+        self._device_update: DeviceUpdate | None = None
+        self._q_cpu: Any = None
         if restore is None:
             self.demo, self.demo_info = build_demo_memory(cfg, self.reward_cfg)
         else:
@@ -146,19 +175,25 @@ class Trainer:
         path: str | Path,
         overrides: dict[str, Any] | None = None,
         on_eval: EvalCallback | None = None,
+        replay: str | None = None,
     ) -> Trainer:
         """Continue the run of a run folder or checkpoint file; `overrides` change config fields
-        (e.g. a later `max_minutes`)."""
+        (e.g. a later `max_minutes`, or `device`: a checkpoint loads on any device, and exactly
+        on the path that wrote it)."""
         ckpt, state = read_checkpoint(path)
         d = json.loads(state["config"])
         d["hidden"] = tuple(d["hidden"])
         d.update(overrides or {})
-        return cls(TrainConfig(**d), run_dir=ckpt.parent, on_eval=on_eval, restore=state)
+        return cls(
+            TrainConfig(**d), run_dir=ckpt.parent, on_eval=on_eval, restore=state, replay=replay
+        )
 
     def _init_from_policy(self, path: str) -> None:
         """Start both networks from a shipped policy (fine-tuning; a paper network is widened
         with near-pad inputs if the config asks for them); ValueError if it differs."""
-        net = load_policy(path).network
+        meta, tensors = read_policy(path)
+        net = QNetwork(**network_kwargs(meta["network"]))
+        net.load_state_dict(tensors)
         try:
             self.agent.q.widened_from(net)
         except ValueError:
@@ -195,6 +230,7 @@ class Trainer:
             "pretrained": self.pretrained,
             "rng": json.dumps(self.rng.bit_generator.state),
             "torch_rng": torch.get_rng_state(),
+            "replay_rng": self.replay_gen.get_state() if self.replay_gen is not None else None,
             "env": encode(self.env.state_dict()),
             "obs": torch.from_numpy(self.obs.copy()),
             "ep_return": torch.from_numpy(self.ep_return.copy()),
@@ -216,6 +252,8 @@ class Trainer:
         self.pretrained = int(state["pretrained"])
         self.rng.bit_generator.state = json.loads(state["rng"])
         torch.set_rng_state(state["torch_rng"])
+        if self.replay_gen is not None and state.get("replay_rng") is not None:
+            self.replay_gen.set_state(state["replay_rng"])
         self.env.load_state_dict(decode(state["env"]))
         self.obs = state["obs"].numpy().copy()
         self.ep_return = state["ep_return"].numpy().copy()
@@ -229,6 +267,46 @@ class Trainer:
         return write_checkpoint(self.run_dir, self.state_dict())
 
     # ---- pieces of the loop
+    def update(self, pretraining: bool = False) -> dict[str, Any]:
+        """One gradient update on a minibatch of the replay memories (the demonstrations only
+        while pre-training), on the path `replay` chose; the loss parts, floats or tensors."""
+        if self.replay_path == "host":
+            return self.agent.update(self.sample(pretraining))
+        if self._device_update is None:
+            assert isinstance(self.replay, DeviceReplay)
+            demo = None
+            if self.demo is not None:
+                demo = DeviceReplay.from_memory(self.demo, self.device)
+            self._device_update = DeviceUpdate(
+                self.agent,
+                self.replay,
+                demo,
+                generator=self.replay_gen,
+                graph=self.cuda_graph,
+                index_rng=self.rng if self.replay_path == "device-numpy" else None,
+            )
+        return self._device_update(pretraining)
+
+    def device_metadata(self) -> dict[str, Any]:
+        """Where this run trains (run metadata: config.json and the saved policies)."""
+        return {
+            "requested": self.cfg.device,
+            "used": describe_device(self.device),
+            "replay": self.replay_path,
+            "cuda_graph": self.cuda_graph,
+            "torch": torch.__version__,
+        }
+
+    def cpu_network(self) -> Any:
+        """The online network on the CPU (itself there; else a copy of its current weights):
+        what the periodic evaluation flies and the policy files hold."""
+        if self.device.type == "cpu":
+            return self.agent.q
+        if self._q_cpu is None:
+            self._q_cpu = copy.deepcopy(self.agent.q).cpu()
+        self._q_cpu.load_state_dict(self.agent.q.state_dict())
+        return self._q_cpu
+
     def sample(self, pretraining: bool = False) -> ReplaySample:
         cfg = self.cfg
         if pretraining:
@@ -242,7 +320,7 @@ class Trainer:
     def evaluate(self, episodes: int | None = None, seed: int | None = None) -> dict[str, float]:
         """Greedy evaluation on seeded episodes (the periodic one of `run`)."""
         ro = rollout(
-            NetActor(self.agent.q, ShieldParams() if self.cfg.shield else None),
+            Runtime(TorchGreedy(self.cpu_network()), self.runtime_config()),
             episodes or self.cfg.eval_episodes,
             self.cfg.eval_seed if seed is None else seed,
             dispersions=self.cfg.dispersions,
@@ -267,18 +345,25 @@ class Trainer:
                 "env_steps": self.c.env_steps,
                 "wall_s": self.c.wall_s,
                 "demos": self.demo_info,
+                "device": self.device_metadata(),
                 **(extra or {}),
             },
         )
-        if self.cfg.shield:
-            meta["shield"] = ShieldParams().to_dict()
-        return save_policy(self.run_dir / name, self.agent.q, meta)
+        return save_policy(self.run_dir / name, self.cpu_network(), self.runtime_config(), meta)
+
+    def runtime_config(self) -> RuntimeConfig:
+        """What the trained network flies behind: the default runtime layer, or none."""
+        return RuntimeConfig() if self.cfg.shield else RuntimeConfig.off()
 
     def run(self) -> dict[str, Any]:
         """Pre-train on demonstrations (DQfD), then interact until a stop criterion."""
         cfg = self.cfg
         (self.run_dir / "config.json").write_text(
-            json.dumps({**cfg.to_dict(), "code_version": code_version()}, indent=2) + "\n"
+            json.dumps(
+                {**cfg.to_dict(), "code_version": code_version(), "run": self.device_metadata()},
+                indent=2,
+            )
+            + "\n"
         )
         logs = RunLogs(self.run_dir)
         bar = self._progress_bar()
@@ -287,14 +372,18 @@ class Trainer:
         if cfg.lr_finetune > 0 and self.pretrained >= cfg.pretrain_updates:
             for group in self.agent.opt.param_groups:
                 group["lr"] = cfg.lr_finetune
+            if self._device_update is not None:
+                self._device_update.reset()  # a captured step keeps the lr it was captured with
         last_log = self._now()
         while not (stop_reason := self._stop_reason()):
             eps = epsilon_at(self.c.episodes, cfg)
             self._env_step(eps, logs, bar)
             if len(self.replay) >= cfg.learning_starts:
                 self.c.update_credit += cfg.updates_per_step
-                while self.c.update_credit >= 1.0:
-                    self.last_info = self.agent.update(self.sample())
+                # the updates of a batched step run together after it (updates_per_step =
+                # num_envs: one per env transition); max_updates stops them on the exact count
+                while self.c.update_credit >= 1.0 and not self._updates_done():
+                    self.last_info = self.update()
                     self.c.update_credit -= 1.0
             t = self._now()
             if t - last_log >= METRICS_PERIOD_S:
@@ -322,6 +411,7 @@ class Trainer:
             "env_steps": self.c.env_steps,
             "updates": self.agent.updates,
             "wall_s": self.c.wall_s,
+            "device": describe_device(self.device),
             "final_policy": str(final),
             "best_eval": list(self.c.best_eval),
         }
@@ -341,9 +431,12 @@ class Trainer:
             return "episodes"
         if cfg.max_minutes > 0 and self._now() >= 60.0 * cfg.max_minutes:
             return "max_minutes"
-        if cfg.max_updates > 0 and self.agent.updates >= cfg.max_updates:
+        if self._updates_done():
             return "max_updates"
         return ""
+
+    def _updates_done(self) -> bool:
+        return 0 < self.cfg.max_updates <= self.agent.updates
 
     def _pretrain(self, logs: RunLogs, bar: Any) -> None:
         """DQfD pre-training: gradient updates on demonstrations only, before any interaction."""
@@ -353,7 +446,7 @@ class Trainer:
             and self.pretrained < self.cfg.pretrain_updates
             and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
         ):
-            self.last_info = self.agent.update(self.sample(pretraining=True))
+            self.last_info = self.update(pretraining=True)
             self.pretrained += 1
             if self.pretrained % PRETRAIN_LOG_EVERY:
                 continue
@@ -419,7 +512,7 @@ class Trainer:
             self._log_scenarios(t)
         if bar is not None:
             bar.set_postfix_str(
-                f"eps {eps:.3f} succ100 {suc:.2f} loss {self.last_info.get('loss', 0):.3g}"
+                f"eps {eps:.3f} succ100 {suc:.2f} loss {float(self.last_info.get('loss', 0)):.3g}"
                 f" upd {self.agent.updates}"
             )
 
@@ -446,8 +539,9 @@ class Trainer:
             self.checkpoint()
 
     def _loss_row(self) -> list[float]:
-        li = self.last_info
-        return [li.get(k, float("nan")) for k in ("loss", "td_loss", "margin_loss", "q_mean")]
+        li = self.last_info  # device tensors on the device path: read back here only
+        keys = ("loss", "td_loss", "margin_loss", "q_mean")
+        return [float(li.get(k, float("nan"))) for k in keys]
 
     def _periodic_eval(self, logs: RunLogs) -> None:
         ev = self.evaluate()
