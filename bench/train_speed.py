@@ -1,14 +1,21 @@
 """Training speed on this machine, side by side in one run.
 
-    python bench/train_speed.py [--threads 1] [--seconds 3]
+    python bench/train_speed.py [--threads 1] [--seconds 3] [--ratio-check 4000]
 
 1. The paper's gradient update (7-300-200-300-147 tanh, RMSProp, 100 agent + 100 demonstration
    samples, Table 2): our `DQNAgent.update` fed by our replay memories, beside a minimal plain-torch
    loop of the same update on fixed tensors, with the GFLOP/s each achieves against a large matmul.
+   Then updates/s on every device present, each beside the plain-torch loop on that device: the
+   CPU (numpy replay, as `pd-train --device cpu`; and the device code path, eager), and where torch
+   sees a GPU, cuda eager and cuda graph (`pd-train --device cuda`: replay memories on the GPU, the
+   whole update one CUDA graph; the plain loop captured the same way).
 2. What one env step of the paper's loop (`pd-train --preset paper-agent1`, one env) costs besides
    the update: epsilon-greedy action, env step, n-step collector, replay insert, minibatch sampling,
    so the per-step cost of any `--updates-per-step` ratio can be read off.
 3. Env throughput, other presets' updates/s, and `Policy.act` latency.
+4. With --ratio-check N (minutes of CPU): the paper's ratio, one update per env transition, flown
+   with 1 env and with 16 envs (--updates-per-step 16), paper-agent2, N updates, seeds 1 and 2:
+   wall time, and the greedy evaluation of each after N/2 and N updates on the same episodes.
 """
 
 from __future__ import annotations
@@ -26,10 +33,12 @@ import torch.nn.functional as F
 
 from pd_core.dqn.agent import DQNAgent, concat_samples
 from pd_core.dqn.config import preset
+from pd_core.dqn.device import WARMUP_STEPS, DeviceReplay, DeviceUpdate
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory
-from pd_core.env import make_vector_env
-from pd_core.policy import load_policy, save_policy
+from pd_core.dqn.train import Trainer
+from pd_core.runtime.policy_file import load_policy, save_policy
+from pd_core.vector_env import make_vector_env
 
 
 def _timed(fn, seconds: float) -> tuple[int, float]:
@@ -105,6 +114,145 @@ def minimal_updates_per_s(seconds: float, batch: int = 200) -> float:
     return _per_s(upd, seconds)
 
 
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def _per_s_on(fn, seconds: float, device: torch.device, warmup: int = 1) -> float:
+    """Calls per second of `fn` on `device`: cuda launches are asynchronous, so the clock is
+    read after a synchronise at both ends (the queue in between keeps the GPU busy)."""
+    for _ in range(warmup):
+        fn()
+    _sync(device)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        for _ in range(10):
+            fn()
+        n += 10
+    _sync(device)
+    return n / (time.perf_counter() - t0)
+
+
+def device_path_updates_per_s(device: torch.device, graph: bool, seconds: float) -> float:
+    """`pd-train`'s device path (`DeviceUpdate`): replay memories on `device`, indices drawn
+    there, the step eager or one CUDA graph; the paper's update (paper-agent1)."""
+    cfg = preset("paper-agent1")
+    torch.manual_seed(0)
+    agent = DQNAgent(cfg, device=device, capturable=graph)
+    mem, demo = _memories(np.random.default_rng(0))
+    gen = torch.Generator(device=device)
+    gen.manual_seed(0)
+    upd = DeviceUpdate(
+        agent,
+        DeviceReplay.from_memory(mem, device),
+        DeviceReplay.from_memory(demo, device),
+        generator=gen,
+        graph=graph,
+    )
+    return _per_s_on(upd, seconds, device, warmup=WARMUP_STEPS + 2)
+
+
+def plain_updates_per_s(device: torch.device, graph: bool, seconds: float, batch: int = 200):
+    """The plain-torch loop of `minimal_updates_per_s` on `device`, eager or captured whole in a
+    CUDA graph (static tensors, capturable RMSprop)."""
+    torch.manual_seed(0)
+    q = QNetwork().to(device)
+    qt = copy.deepcopy(q)
+    opt = torch.optim.RMSprop(q.parameters(), lr=1e-5, capturable=graph)
+    obs, nobs = torch.randn(batch, 7, device=device), torch.randn(batch, 7, device=device)
+    a = torch.randint(0, 147, (batch,), device=device)
+    r, d = torch.randn(batch, device=device), torch.rand(batch, device=device)
+
+    def upd() -> None:
+        qa = q(obs).gather(1, a[:, None]).squeeze(1)
+        with torch.no_grad():
+            tgt = r + d * qt(nobs).max(1).values
+        loss = F.mse_loss(qa, tgt)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+
+    if not graph:
+        return _per_s_on(upd, seconds, device)
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        for _ in range(WARMUP_STEPS):
+            upd()
+    torch.cuda.current_stream().wait_stream(side)
+    g = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(g):
+        upd()
+    return _per_s_on(g.replay, seconds, device)
+
+
+def device_report(seconds: float, numpy_ups: float, plain_cpu_ups: float) -> None:
+    """Part 1, continued: updates/s on every device here, beside the plain loop there."""
+    rows = [
+        ("cpu", "numpy replay (--device cpu)", numpy_ups, plain_cpu_ups),
+        (
+            "cpu",
+            "device path, eager",
+            device_path_updates_per_s(torch.device("cpu"), False, seconds),
+            plain_cpu_ups,
+        ),
+    ]
+    if torch.cuda.is_available():
+        cuda = torch.device("cuda")
+        for graph, mode in ((False, "eager"), (True, "CUDA graph (--device cuda)")):
+            rows.append(
+                (
+                    f"cuda ({torch.cuda.get_device_name(cuda)})",
+                    mode,
+                    device_path_updates_per_s(cuda, graph, seconds),
+                    plain_updates_per_s(cuda, graph, seconds),
+                )
+            )
+    else:
+        rows.append(("cuda", "none here: torch sees no GPU", float("nan"), float("nan")))
+    print("   updates/s on every device here, beside the plain-torch loop on the same device")
+    print(f"   {'device':34s} {'mode':28s} {'pd-train':>9s} {'plain':>9s} {'ratio':>6s}")
+    for dev, mode, ours, plain in rows:
+        print(f"   {dev:34s} {mode:28s} {ours:9.1f} {plain:9.1f} {ours / plain:6.2f}")
+    best = max((r for r in rows if r[2] == r[2]), key=lambda r: r[2])
+    print(f"   fastest: {best[0]}, {best[1]}: {best[2] / numpy_ups:.1f}x the CPU's numpy path")
+
+
+def ratio_check(
+    updates: int, seeds: tuple[int, ...] = (1, 2), episodes: int = 200, lr: float = 0.0
+) -> None:
+    """Part 4: the paper's ratio with 1 env and with 16 envs, same seed and update count."""
+    lr = lr or preset("paper-agent2").lr
+    print(
+        f"4. The paper's ratio (1 update per env transition), paper-agent2 (lr {lr:g}), "
+        f"{updates} updates, greedy evaluation on the same {episodes} episodes (seed 900000)"
+    )
+    cols = ("success_rate", "pos_median", "kvel_min", "fuel_median", "mean_return")
+    print(f"   {'seed':>4s} {'envs':>4s} {'updates':>7s} {'wall s':>7s} " + " ".join(
+        f"{c:>12s}" for c in cols
+    ))  # fmt: skip
+    with tempfile.TemporaryDirectory() as d:
+        for seed in seeds:
+            for n in (1, 16):
+                cfg = preset(
+                    "paper-agent2", seed=seed, num_envs=n, updates_per_step=float(n),
+                    max_updates=updates // 2, eval_every_s=0.0, checkpoint_every_s=1e9, lr=lr,
+                    progress=False, device="cpu", run_dir=f"{d}/s{seed}n{n}",
+                )  # fmt: skip
+                tr, wall = Trainer(cfg, quiet=True), 0.0
+                for stop in (updates // 2, updates):
+                    if stop > cfg.max_updates:
+                        tr = Trainer.resume(cfg.run_dir, {"max_updates": stop})
+                        tr.quiet = True
+                    t0 = time.perf_counter()
+                    tr.run()
+                    wall += time.perf_counter() - t0
+                    ev = tr.evaluate(episodes, seed=900_000)
+                    vals = " ".join(f"{ev[c]:12.3f}" for c in cols)
+                    print(f"   {seed:4d} {n:4d} {tr.agent.updates:7d} {wall:7.1f} {vals}")
+
+
 def loop_costs_us(seconds: float) -> dict[str, float]:
     """Microseconds per call of each piece of the paper preset's loop (one env)."""
     cfg = preset("paper-agent1")
@@ -142,7 +290,8 @@ def loop_costs_us(seconds: float) -> dict[str, float]:
 def act_time_us(seconds: float) -> tuple[float, float, float, float, float]:
     """Policy.act through numpy, the same behind the shield (a Table 3 state; a wide-box corner
     state the shield hands to the teacher), Policy.act_online predicting through two steps of
-    identified delay (pd_core.latency) from the navigation filter's estimate (pd_core.navfilter),
+    identified delay (pd_core.runtime.latency) from the navigation filter's estimate
+    (pd_core.runtime.navfilter),
     torch forward+argmax."""
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as d:
@@ -194,6 +343,7 @@ def paper_update_report(seconds: float) -> float:
         print(f"   {name:34s} {ups:10.1f} {g:8.1f} {g / peak:9.0%}")
     print(f"   {'2048x2048 matmul':34s} {'':10s} {peak:8.1f} {1:9.0%}")
     print(f"   ours / minimal: {ours / floor:.2f}; {flops / 1e6:.0f} MFLOP per update")
+    device_report(seconds, ours, floor)
     return 1e6 / ours
 
 
@@ -201,10 +351,24 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds per figure (default 3)")
+    ap.add_argument(
+        "--ratio-check",
+        type=int,
+        default=0,
+        metavar="UPDATES",
+        help="also part 4: 1 env against 16 envs at the paper's ratio, this many updates "
+        "(a few minutes of CPU at 4000; default 0: skip)",
+    )
+    ap.add_argument("--ratio-lr", type=float, default=0.0, help="part 4's lr (default: Table 2)")
+    ap.add_argument("--only-updates", action="store_true", help="part 1 only (and part 4)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     print(f"torch threads: {a.threads}")
     upd_us = paper_update_report(a.seconds)
+    if a.only_updates:
+        if a.ratio_check:
+            ratio_check(a.ratio_check, lr=a.ratio_lr)
+        return
     costs = loop_costs_us(a.seconds)
     print("2. One env step of the paper's loop besides the update (us per call)")
     for name, us in costs.items():
@@ -233,6 +397,8 @@ def main() -> None:
         f"teacher; act_online (navigation filter, 2 steps of identified delay) {uslat:.1f} us "
         f"({uslat / us:.2f}x); torch forward+argmax {ust:.1f} us"
     )
+    if a.ratio_check:
+        ratio_check(a.ratio_check, lr=a.ratio_lr)
 
 
 if __name__ == "__main__":
