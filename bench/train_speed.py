@@ -25,7 +25,6 @@ import copy
 import tempfile
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -37,7 +36,6 @@ from pd_core.dqn.device import WARMUP_STEPS, DeviceReplay, DeviceUpdate
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory
 from pd_core.dqn.train import Trainer
-from pd_core.runtime.policy_file import load_policy, save_policy
 from pd_core.vector_env import make_vector_env
 
 
@@ -287,36 +285,6 @@ def loop_costs_us(seconds: float) -> dict[str, float]:
     return out
 
 
-def act_time_us(seconds: float) -> tuple[float, float, float, float, float]:
-    """Policy.act through numpy, the same behind the shield (a Table 3 state; a wide-box corner
-    state the shield hands to the teacher), Policy.act_online predicting through two steps of
-    identified delay (pd_core.runtime.latency) from the navigation filter's estimate
-    (pd_core.runtime.navfilter),
-    torch forward+argmax."""
-    torch.manual_seed(0)
-    with tempfile.TemporaryDirectory() as d:
-        path = save_policy(Path(d) / "m", QNetwork())
-        pol = load_policy(path)
-        shielded = load_policy(path, shield="always")
-    s = np.array([800.0, 100.0, 2500.0, -40.0, 10.0, -80.0, 2000.0])
-    n, dt = _timed(lambda: pol.act(s), seconds)
-    k, dt_sh = _timed(lambda: shielded.act(s), seconds)
-    corner = np.array([0.0, -1800.0, 300.0, 0.0, -40.0, -40.0, 1800.0])
-    j, dt_ho = _timed(lambda: shielded.act(corner), seconds)
-    shielded.latency.delay_steps[0] = 2
-    shielded.latency.margin = np.inf  # keep the lag at 2 whatever the residuals say
-    i, dt_lat = _timed(lambda: shielded.act_online(s), seconds)
-    net = pol.network
-    x = torch.from_numpy((s * 1.0).astype(np.float32))[None]
-
-    def torch_act() -> None:
-        with torch.no_grad():
-            net(x).argmax()
-
-    m, dt2 = _timed(torch_act, seconds)
-    return 1e6 * dt / n, 1e6 * dt_sh / k, 1e6 * dt_ho / j, 1e6 * dt_lat / i, 1e6 * dt2 / m
-
-
 def env_steps_per_s(num_envs: int, seconds: float) -> float:
     env = make_vector_env(num_envs)
     env.reset(seed=0)
@@ -390,13 +358,7 @@ def main() -> None:
         cfg = replace(preset(name), **kw)
         ups = ours_updates_per_s(name, a.seconds, **kw)
         print(f"   updates/s, {name:12s} batch {cfg.batch_agent}+{cfg.batch_demo}: {ups:8.1f}")
-    us, ussh, usho, uslat, ust = act_time_us(a.seconds)
-    print(
-        f"   Policy.act(one state): numpy {us:.1f} us; behind the shield {ussh:.1f} us "
-        f"({ussh / us:.2f}x), {usho:.1f} us ({usho / us:.2f}x) where it hands over to the "
-        f"teacher; act_online (navigation filter, 2 steps of identified delay) {uslat:.1f} us "
-        f"({uslat / us:.2f}x); torch forward+argmax {ust:.1f} us"
-    )
+    print("   one decision of a policy file behind its runtime layer: bench/runtime_speed.py")
     if a.ratio_check:
         ratio_check(a.ratio_check, lr=a.ratio_lr)
 
