@@ -7,7 +7,8 @@
    from that state, while the lander flies in closed loop at the real 5 Hz (--fast: lockstep, as
    fast as the policy answers), recorded to an MCAP bag;
 3. prints the touchdown state, fuel against the OCP's fuel and whether it landed, writes a PNG of
-   the flight beside the OCP's trajectory, stops every process it started and exits 0
+   the flight beside the OCP's trajectory and one drawn from the bag alone (bag.png: lander/path
+   and ocp/plan, as `scripts/bag_to_png.py` draws it), stops every process it started and exits 0
    (1 if the stack failed to fly the episode; landing or crashing both count as flown).
 
 It starts its own nodes on a domain of its own: a `--ros-args` section (as `ros2 run` or a launch
@@ -25,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from pd_bringup.bag import read_bag
+from pd_bringup import bag_plot
+from pd_bringup.bag import BagError, read_bag
 from pd_bringup.flight import FlightClient, FlightError
 from pd_bringup.guidance import bag_counts, node_counts
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
@@ -139,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
         flight_label=f"flight over ROS 2 ({args.controller})",
     )
     print(f"  plot {png}")
+    try:  # what a viewer sees, from the bag alone (lander/path and ocp/plan)
+        print(f"  bag plot {bag_plot.render(bag, out / 'bag.png')}")
+    except BagError as exc:
+        print(f"  bag plot: none ({exc})")
     print("pd_demo: done, every process stopped", flush=True)
     return 0
 

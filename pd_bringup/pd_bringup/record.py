@@ -1,6 +1,6 @@
 """pd_record: record topics to a rosbag2 bag (MCAP storage) with the `rosbags` library.
 
-    pd_record                                  # the stack's lander/* topics (names.LANDER_TOPICS)
+    pd_record                                  # the stack's topics (names.RECORD_TOPICS)
     pd_record -o bags/run1 /lander/state /lander/thrust_cmd
     pd_record --duration 30 /lander/state
     pd_record --ros-args -r __ns:=/vehicle1     # the stack of namespace /vehicle1
@@ -18,6 +18,11 @@ when the stop begins, while the node still exists) is stored in the bag. Relativ
 resolve in the recorder's namespace; topics of unknown type are looked up in the ROS graph (a
 stop during that wait records the topics whose type is known). ROS arguments (`--ros-args ...`)
 may come anywhere on the command line.
+
+By default it records the lander/* topics, the viewer topics (lander/odom, lander/path, ocp/plan)
+and /diagnostics (not /clock: `ros2 bag play --clock` makes one). It publishes its own
+/diagnostics at 1 Hz: messages per topic, gaps (never arrived), DDS losses, messages queued and
+not written; ERROR once anything was lost (pd_ros_common.diagnostics).
 """
 
 from __future__ import annotations
@@ -34,15 +39,19 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos
+from rosgraph_msgs.msg import Clock
 
 from pd_bringup.bag import bag_qos, flush_writer, message_class, open_writer, type_name, typestore
 from pd_interfaces.msg import EpisodeResult, GuidanceStatus, LanderState, ThrustCommand
-from pd_ros_common import names, qos
+from pd_ros_common import diagnostics, names, qos
 from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.gaps import SequenceGaps
 
@@ -51,8 +60,19 @@ KNOWN_TYPES: dict[str, type] = {
     names.COMMAND_TOPIC: ThrustCommand,
     names.EPISODE_TOPIC: EpisodeResult,
     names.GUIDANCE_TOPIC: GuidanceStatus,
+    names.ODOM_TOPIC: Odometry,
+    names.PATH_TOPIC: PathMsg,
+    names.PLAN_TOPIC: PathMsg,
+    names.DIAGNOSTICS_TOPIC: DiagnosticArray,
+    names.CLOCK_TOPIC: Clock,
 }
-KNOWN_QOS = {names.EPISODE_TOPIC: qos.EPISODE_QOS}  # fallback when no publisher is seen
+KNOWN_QOS = {  # fallback when no publisher is seen
+    names.EPISODE_TOPIC: qos.EPISODE_QOS,
+    names.PATH_TOPIC: qos.PATH_QOS,
+    names.PLAN_TOPIC: qos.PATH_QOS,
+    names.DIAGNOSTICS_TOPIC: qos.DIAGNOSTICS_QOS,
+    names.CLOCK_TOPIC: qos.CLOCK_QOS,
+}
 STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most this long
 
 
@@ -135,6 +155,31 @@ class Recorder(Node):
 
     def _default_qos(self, topic: str) -> list[Qos]:
         return [bag_qos(self.known_qos.get(topic, qos.LOOP_PUB_QOS))]
+
+    def report_on(self, writer: BagWriter) -> None:
+        """Publish /diagnostics of `writer` at 1 Hz."""
+        self._since = diagnostics.Since()
+        self._writer = writer
+        self.diagnostics = diagnostics.Diagnostics(self, "recorder", self._report)
+
+    def _report(self) -> diagnostics.Report:
+        w = self._writer
+        counts, gaps = list(w.counts), list(w.gaps)
+        lost = sum(gaps) + self.lost_events + w.unwritten
+        d = self._since(messages=sum(counts))
+        r = diagnostics.Report(ok_message=f"recording to {w.bag}")
+        r.values = {
+            "bag": str(w.bag),
+            "messages": sum(counts),
+            "messages (last period)": int(d["messages"]),
+            **{f"messages {t}": n for t, n in zip(self.topics, counts, strict=True)},
+            "gaps (never arrived)": sum(gaps),
+            **{f"gaps {t}": n for t, n in zip(self.topics, gaps, strict=True) if n},
+            "lost (DDS events)": self.lost_events,
+            "queued": w.sink.qsize(),
+        }
+        r.rule(diagnostics.ERROR, lost > 0, f"{lost} message(s) lost since the start")
+        return r
 
     def freeze_qos(self) -> None:
         """Ask the graph one last time for every topic's QoS; call before `destroy_node` (the
@@ -239,8 +284,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument(
         "topics",
         nargs="*",
-        default=list(names.LANDER_TOPICS),
-        help=f"topics to record (default: {' '.join(names.LANDER_TOPICS)})",
+        default=list(names.RECORD_TOPICS),
+        help=f"topics to record (default: {' '.join(names.RECORD_TOPICS)})",
     )
     p.add_argument(
         "-o",
@@ -292,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         node = Recorder(args.topics, sink, args.discovery_timeout, stop)
         writer = BagWriter(bag, node, sink, args.flush)
         writer.start()
+        node.report_on(writer)
         executor.add_node(node)
         node.get_logger().info(f"recording {', '.join(node.topics)} to {bag}")
         t_end = time.monotonic() + args.duration if args.duration > 0 else float("inf")

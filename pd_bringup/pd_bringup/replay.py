@@ -13,8 +13,9 @@ recovered up to its last complete chunk; a bag that cannot be read at all is one
 (`--wait-subscribers N`: N of them), so a replay into a node started at the same time does not
 lose its first seconds. After `--wait-timeout` (30 s) the replay starts anyway, naming the topics
 nobody subscribes to; if no topic has a subscriber at all, it publishes nothing and exits 1.
-`--no-wait` (or `--wait-subscribers 0`) publishes at once. ROS arguments (`--ros-args ...`) may
-come anywhere on the command line.
+`--no-wait` (or `--wait-subscribers 0`) publishes at once. Topics only viewers read (odometry,
+paths, /diagnostics, /clock: `viewer_only`) are not waited for, unless the replay has nothing
+else. ROS arguments (`--ros-args ...`) may come anywhere on the command line.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from pd_bringup.bag import BagError, message_class, read_bag, replay_qos
+from pd_ros_common import names
 from pd_ros_common.cli import UsageError, split_ros_args
 
 WAIT_TIMEOUT_S = 30.0
@@ -74,6 +76,13 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         help=f"seconds for that wait (default {WAIT_TIMEOUT_S:g}); then it replays anyway",
     )
     return p.parse_args(argv)
+
+
+def viewer_only(topic: str) -> bool:
+    """True for a topic nobody in the stack subscribes to (in any namespace)."""
+    if topic in (names.DIAGNOSTICS_TOPIC, names.CLOCK_TOPIC):
+        return True
+    return any(topic.endswith("/" + t) for t in names.VIEW_TOPICS)
 
 
 def wait_for_subscribers(pubs: dict[str, Any], wanted: int, timeout_s: float) -> bool:
@@ -156,8 +165,9 @@ def main(argv: list[str] | None = None) -> int:
             t: node.create_publisher(message_class(m), remap.get(t, t), replay_qos(offered))
             for t, (m, offered) in types.items()
         }
+        waited = {t: p for t, p in pubs.items() if not viewer_only(t)} or pubs
         if args.wait_subscribers > 0 and not wait_for_subscribers(
-            pubs, args.wait_subscribers, args.wait_timeout
+            waited, args.wait_subscribers, args.wait_timeout
         ):
             return 1
         t0_wall = time.monotonic()

@@ -15,3 +15,4 @@ class Command:
     action: int
     thrust_n: tuple[float, float, float]
     source: str = ""  # name of the publishing node ("" when unknown or not asked for)
+    lander_id: str = ""  # the lander whose state it answers ("" = unaddressed, any lander)

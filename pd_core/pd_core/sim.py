@@ -6,11 +6,15 @@ applied only if it is valid for the step being flown and is the first valid one 
 (a second command for an answered step, from a second policy node or a stray publisher, is
 rejected as a "conflict", or a "duplicate" when it repeats the first). With `command_source`
 set, only commands from the node of that name fly: a stray publisher cannot take a step even
-when it answers first (rejected as "foreign"). Anything else is rejected
-with a reason, counted, and never applied. An initial state is accepted only if the OCP would
-take it (`pd_core.ocp.check_request`: above ground, above the dry mass, plausible magnitudes).
-When a step has to be flown without a fresh command, the last applied command is held
-(`missing_command="hold"`) or zero thrust is used (`"zero"`).
+when it answers first (rejected as "foreign"). A simulator run has an identity, `lander_id`: a
+command that names another lander (`Command.lander_id`, echoed by the policy from the state it
+answers) is meant for a second simulator on the same names; it is counted apart as foreign
+(`Counters.foreign_commands`, per other lander in `foreign_by_lander`), never judged as stale or
+flown, and not counted as rejected. A command naming no lander ("") is judged as before.
+Anything else is rejected with a reason, counted, and never applied. An initial state is accepted
+only if the OCP would take it (`pd_core.ocp.check_request`: above ground, above the dry mass,
+plausible magnitudes). When a step has to be flown without a fresh command, the last applied
+command is held (`missing_command="hold"`) or zero thrust is used (`"zero"`).
 
 Flying the same seed, initial state and actions through `Simulator` and through
 `PoweredDescentEnv` gives bit-identical states: `Simulator.advance` calls `env.step(action)`.
@@ -69,6 +73,8 @@ class Counters:
     rejected_commands: int = 0
     missed_commands: int = 0
     rejected_by_reason: dict[str, int] = field(default_factory=dict)
+    foreign_commands: int = 0  # commands for another lander_id (not flown, not "rejected")
+    foreign_by_lander: dict[str, int] = field(default_factory=dict)
 
 
 def check_command(
@@ -121,6 +127,16 @@ def check_source(cmd: Command, command_source: str) -> tuple[str, str] | None:
     return "foreign", (
         f"command for episode {cmd.episode} step {cmd.step} from {sender}, not from "
         f"{command_source!r} (command_source): not flown"
+    )
+
+
+def check_lander(cmd: Command, lander_id: str) -> tuple[str, str] | None:
+    """None if `cmd` is for the lander `lander_id` (or names none), else ("foreign", message)."""
+    if not cmd.lander_id or not lander_id or cmd.lander_id == lander_id:
+        return None
+    return "foreign", (
+        f"command for lander {cmd.lander_id!r} (episode {cmd.episode} step {cmd.step}) heard "
+        f"by lander {lander_id!r}: another simulator shares these names; not flown"
     )
 
 
@@ -186,6 +202,7 @@ class Simulator:
         delay_steps: int = 0,
         nav_sigma: tuple[float, float] = (0.0, 0.0),
         thrust_scale: float = 1.0,
+        lander_id: str = "",
     ) -> None:
         lo, hi = THRUST_SCALE_RANGE
         if not (math.isfinite(thrust_scale) and lo <= thrust_scale <= hi):
@@ -213,6 +230,8 @@ class Simulator:
         self.actions = actions
         self.missing_command = missing_command
         self.command_source = command_source
+        self.lander_id = lander_id
+        """identity of this run: commands naming another lander are foreign ("": none checked)"""
         """only commands whose `source` is this node name fly ("": any publisher)"""
         self.delay_steps = delay_steps
         """actuation delay: the plant flies the command of this many steps earlier (a FIFO
@@ -236,6 +255,7 @@ class Simulator:
         self._initial = np.zeros(7)
         self._ep_rejected = 0
         self._ep_missed = 0
+        self._ep_foreign = 0
         self._last_result: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ episode control
@@ -296,12 +316,23 @@ class Simulator:
         self._draw_nav_noise()
         self._ep_rejected = 0
         self._ep_missed = 0
+        self._ep_foreign = 0
         self.counters.episodes_started += 1
         return self.episode, self._initial.copy(), interrupted
 
     # ------------------------------------------------------------------ commands
     def submit(self, cmd: Command) -> tuple[str, str] | None:
-        """Validate and store a command for the current step; None or (kind, reason) if rejected."""
+        """Validate and store a command for the current step; None or (kind, reason) if rejected.
+
+        A command for another lander gives ("foreign", reason) and is counted as foreign only."""
+        foreign = check_lander(cmd, self.lander_id)
+        if foreign is not None:
+            c = self.counters
+            c.foreign_commands += 1
+            c.foreign_by_lander[cmd.lander_id] = c.foreign_by_lander.get(cmd.lander_id, 0) + 1
+            if self.flying:
+                self._ep_foreign += 1
+            return foreign
         where = (self.episode, self.step) if self.flying else (None, None)
         err = check_source(cmd, self.command_source) or check_command(
             cmd, *where, actions=self.actions
@@ -381,6 +412,8 @@ class Simulator:
             "reason": describe_end(status, s, self.time_s),
             "rejected_commands": self._ep_rejected,
             "missed_commands": self._ep_missed,
+            "foreign_commands": self._ep_foreign,
+            "lander_id": self.lander_id,
         }
         self.flying = False
         self._pending = None

@@ -11,6 +11,11 @@ executor threads are always left for parameter services. Bad requests (NaN/inf, 
 altitude <= 0, absurd magnitudes, unknown method/objective) and solver failures or timeouts get
 success=false with the reason; nothing a request holds can kill the node.
 
+Each successful answer is also published on ocp/plan (nav_msgs/Path of the planned positions, frame
+landing_site, TRANSIENT_LOCAL: a viewer started later still draws the last plan; pose k stamped
+the node's time now plus the plan's state time k). /diagnostics (1 Hz): solve times, requests
+pending, busy and failed answers (levels: pd_ros_common.diagnostics).
+
 Parameters are listed in PARAMETERS below (defaults in pd_bringup/config/ocp.yaml); method,
 objective, control_points and timeout_s may be changed at run time (validated) and apply to the
 next request that leaves the field empty or zero.
@@ -24,12 +29,14 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
+from nav_msgs.msg import Path
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
@@ -37,8 +44,8 @@ from pd_core import ocp
 from pd_core.config import OCP_CONTROL_POINTS
 from pd_core.discretise import discretise
 from pd_interfaces.srv import ComputeTrajectory
-from pd_ros_common import names, params, qos
-from pd_ros_common.convert import fill_ocp_response, from_vec3, vec3
+from pd_ros_common import diagnostics, names, params, qos
+from pd_ros_common.convert import fill_ocp_response, from_vec3, plan_path_msg, vec3
 from pd_ros_common.run import run_node
 
 NODE_NAME = "pd_ocp_node"
@@ -124,6 +131,14 @@ class OcpNode(Node):
         self._count_lock = threading.Lock()
         self._pending = 0
         self.served = 0
+        self.succeeded = 0
+        self.failed = 0  # answered success=false (bad request, solver failure, timeout)
+        self.busy = 0  # answered "busy" at once
+        self._solve_times: deque[float] = deque(maxlen=10_000)
+        self._period_solve_times: list[float] = []
+        self._since = diagnostics.Since()
+        self._plan_pub = self.create_publisher(Path, names.PLAN_TOPIC, qos.PATH_QOS)
+        self.diagnostics = diagnostics.Diagnostics(self, "ocp", self._report)
         self.create_service(
             ComputeTrajectory,
             names.OCP_SERVICE,
@@ -148,20 +163,69 @@ class OcpNode(Node):
             if not busy:
                 self._pending += 1
         if busy:
+            with self._count_lock:
+                self.busy += 1
             response.success = False
             response.message = f"busy: {self._pending} requests in progress; try again later"
             return response
         try:
-            return self._solve(request, response)
+            response = self._solve(request, response)
+            self._count(response)
+            return response
         except Exception as exc:  # the node never dies of a request
             self.get_logger().error(f"request failed: {exc!r}")
             response = ComputeTrajectory.Response()
             response.success = False
             response.message = f"internal error: {exc!r}"
+            self._count(response)
             return response
         finally:
             with self._count_lock:
                 self._pending -= 1
+
+    def _count(self, response: ComputeTrajectory.Response) -> None:
+        """Count an answer; publish a successful one's plan on ocp/plan."""
+        with self._count_lock:
+            if response.success:
+                self.succeeded += 1
+            else:
+                self.failed += 1
+            if response.solve_time > 0:
+                self._solve_times.append(response.solve_time)
+                self._period_solve_times.append(response.solve_time)
+        if response.success and len(response.positions):
+            now_ns = self.get_clock().now().nanoseconds
+            self._plan_pub.publish(plan_path_msg(response, now_ns))
+
+    def _report(self) -> diagnostics.Report:
+        """/diagnostics of the last period (rules: pd_ros_common.diagnostics)."""
+        with self._count_lock:
+            times = np.asarray(self._solve_times, dtype=float)
+            period, self._period_solve_times = self._period_solve_times, []
+            pending, busy, failed = self._pending, self.busy, self.failed
+            d = self._since(busy=busy, failed=failed)
+            succeeded = self.succeeded
+
+        def pct(q: float) -> float:
+            return float(np.percentile(times, q)) if times.size else float("nan")
+
+        r = diagnostics.Report(ok_message="solving" if pending else "idle")
+        r.values = {
+            "pending requests": pending,
+            "max_pending": self.max_pending,
+            "answered": succeeded + failed + busy,
+            "succeeded": succeeded,
+            "failed": failed,
+            "busy answers": busy,
+            "solved (last period)": len(period),
+            "solve time p50 (s)": pct(50),
+            "solve time p99 (s)": pct(99),
+            "solve time max (s)": float(times.max()) if times.size else float("nan"),
+            "last solve time (s)": float(times[-1]) if times.size else float("nan"),
+        }
+        r.rule(diagnostics.WARN, d["busy"] > 0, f"{int(d['busy'])} request(s) answered busy")
+        r.rule(diagnostics.WARN, d["failed"] > 0, f"{int(d['failed'])} request(s) failed")
+        return r
 
     def _solve(
         self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response

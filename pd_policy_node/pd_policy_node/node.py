@@ -16,6 +16,15 @@ not FLYING (the final state of an episode) needs no command and gets none, and a
 after it was answered (a lockstep resend) is not answered twice. States that never
 reach the node (a step gap within an episode, or a DDS message-lost event) are counted and logged.
 
+Every command (and its guidance status) carries the `lander_id` of the state it answers, so a
+simulator can tell its own commands from another's. States of a second lander on the same names
+(two stacks without namespaces) are still answered, each with its own id and with the runtime's
+memory started afresh whenever the lander changes (it never mixes two landers), and the first
+state of each further lander is logged as an error naming it; /diagnostics is then at ERROR.
+/diagnostics (1 Hz): decision time p50/p99, the runtime layer's share of changed actions per rule
+(`Runtime.counts`), the model file and the runtime config's hash (levels:
+pd_ros_common.diagnostics).
+
 Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
 """
 
@@ -41,7 +50,7 @@ from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import SHIELD_MODES, PolicyLoadError
 from pd_core.state import check_state
 from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
-from pd_ros_common import names, params, qos
+from pd_ros_common import diagnostics, names, params, qos
 from pd_ros_common.convert import command_msg, guidance_msg, state_from_msg
 from pd_ros_common.run import run_node
 
@@ -108,6 +117,13 @@ def default_model_path() -> Path:
     return candidates[0]
 
 
+def model_file(name: str, model_path: str) -> str:
+    """The policy file flown by controller `name` ("" for a reference controller)."""
+    if name != DQN:
+        return ""
+    return str(Path(model_path) if model_path else default_model_path())
+
+
 def load_controller(
     name: str, model_path: str, shield: str = "file", settings: str = ""
 ) -> tuple[Runtime, str]:
@@ -164,7 +180,14 @@ class PolicyNode(Node):
             # Warm up numpy so the first real state is answered as fast as the rest (not the
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).
             self.policy.bare_action((TABLE3.lo + TABLE3.hi) / 2)
-        self._episode: int | None = None  # the episode the runtime's memory belongs to
+        self.model_file = model_file(p["controller"], p["model_path"])
+        self.config_hash = config_hash(self.policy.config)
+        # (lander_id, episode) the runtime's memory belongs to
+        self._episode: tuple[str, int] | None = None
+        self.landers: dict[str, int] = {}  # states received per lander_id (non-empty ids)
+        self._landers_period: set[str] = set()
+        self._period_times: list[float] = []
+        self._since = diagnostics.Since()
 
         self._times: deque[float] = deque(maxlen=100_000)
         self._since_log: list[float] = []
@@ -172,8 +195,9 @@ class PolicyNode(Node):
         self.invalid = 0
         self.gaps = 0  # states of an episode that never arrived (step gaps)
         self.lost = 0  # DDS message-lost events
-        self._last: tuple[int, int] = (0, -1)  # (episode, step) of the last state received
-        self._answered: tuple[int, int] | None = None  # ... and of the last one answered
+        # per lander_id: (episode, step) of the last state received
+        self._last: dict[str, tuple[int, int]] = {}
+        self._answered: tuple[str, int, int] | None = None  # lander, episode, step last answered
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
@@ -193,6 +217,9 @@ class PolicyNode(Node):
         self.get_logger().info(f"policy ready: {described}")
         # DDS discovery of the simulator takes a moment after start-up; say when it is done.
         self._connect_timer = self.create_timer(0.05, self._check_connected)
+        self.diagnostics = diagnostics.Diagnostics(
+            self, "policy", self._report, hardware_id=lambda: ", ".join(sorted(self.landers))
+        )
 
     def _check_connected(self) -> None:
         n = self._state_sub.get_publisher_count()
@@ -209,30 +236,46 @@ class PolicyNode(Node):
         )
 
     def _count_gap(self, msg: LanderState) -> None:
-        episode, step = self._last
+        last = self._last.get(msg.lander_id, (0, -1))
+        episode, step = last
         if msg.episode == episode and msg.step > step + 1:
             self.gaps += msg.step - step - 1
             self.get_logger().warning(
                 f"episode {episode}: states {step + 1}..{msg.step - 1} never arrived "
                 f"[{self.gaps} missing so far]"
             )
-        if (msg.episode, msg.step) > self._last:
-            self._last = (msg.episode, msg.step)
+        if (msg.episode, msg.step) > last:
+            self._last[msg.lander_id] = (msg.episode, msg.step)
+
+    def _count_lander(self, lander_id: str) -> None:
+        """Count states per lander; a further lander is a set-up error: say so once."""
+        if not lander_id:
+            return  # a state naming no lander (a test or replay of an old bag)
+        self._landers_period.add(lander_id)
+        if lander_id not in self.landers and self.landers:
+            self.get_logger().error(
+                f"states of lander {lander_id!r} arrive on {self._state_sub.topic_name} besides "
+                f"lander(s) {', '.join(sorted(self.landers))}: a second simulator shares these "
+                "names (give each stack its own namespace, -r __ns:=/vehicle2). Each is answered "
+                "with its own lander_id"
+            )
+        self.landers[lander_id] = self.landers.get(lander_id, 0) + 1
 
     def _on_state(self, msg: LanderState) -> None:
         t0 = time.perf_counter()
+        self._count_lander(msg.lander_id)
         self._count_gap(msg)
         if msg.status != LanderState.FLYING:
             return  # the episode is over: nothing to answer
-        if (msg.episode, msg.step) == self._answered:
+        if (msg.lander_id, msg.episode, msg.step) == self._answered:
             # Sent again (lockstep resend) while our answer was on its way: a slow controller
             # would otherwise pile up solves of the same state. A new node still answers it.
             self.repeats += 1
             return
         try:
             state = check_state(state_from_msg(msg))
-            if msg.episode != self._episode:
-                self._episode = msg.episode
+            if (msg.lander_id, msg.episode) != self._episode:
+                self._episode = (msg.lander_id, msg.episode)
                 self.policy.begin_episode()
             action, decision = self.policy.step(state)
         except ValueError as exc:
@@ -246,9 +289,10 @@ class PolicyNode(Node):
         self._cmd_pub.publish(command_msg(msg, action, self.policy.thrust(action)))
         dt = time.perf_counter() - t0
         self._status_pub.publish(guidance_msg(msg, decision, dt))
-        self._answered = (msg.episode, msg.step)
+        self._answered = (msg.lander_id, msg.episode, msg.step)
         self._times.append(dt)
         self._since_log.append(dt)
+        self._period_times.append(dt)
         self.answered += 1
 
     def decision_stats(self, samples: Any = None) -> str:
@@ -274,6 +318,51 @@ class PolicyNode(Node):
                 f"{self._counts()}"
             )
             self._since_log = []
+
+    def _report(self) -> diagnostics.Report:
+        """/diagnostics of the last period (rules: pd_ros_common.diagnostics)."""
+        period, self._period_times = np.asarray(self._period_times) * 1e3, []
+        overall = np.asarray(self._times, dtype=float) * 1e3
+        landers, self._landers_period = sorted(self._landers_period), set()
+        d = self._since(invalid=self.invalid, gaps=self.gaps, lost=self.lost)
+        r = diagnostics.Report(ok_message="answering" if period.size else "waiting for states")
+
+        def pct(a: np.ndarray, q: float) -> float:
+            return float(np.percentile(a, q)) if a.size else float("nan")
+
+        share = diagnostics.counts_share(self.policy.counts, "network")
+        r.values = {
+            "controller": self.controller_name,
+            "model file": self.model_file or "(none: reference controller)",
+            "runtime config hash": self.config_hash,
+            "runtime layer": "off" if self.policy.config.is_off else "on",
+            "landers": ", ".join(sorted(self.landers)) or "none",
+            "landers (last period)": ", ".join(landers) or "none",
+            "answered": self.answered,
+            "answered (last period)": int(period.size),
+            "decision time p50 (ms)": pct(overall, 50),
+            "decision time p99 (ms)": pct(overall, 99),
+            "decision time p99 last period (ms)": pct(period, 99),
+            "layer changed share": sum(share.values()),
+            **{f"layer changed share ({k})": v for k, v in share.items()},
+            **{f"decided by {k}": v for k, v in self.policy.counts.items()},
+            "repeated states": self.repeats,
+            "invalid states": self.invalid,
+            "missing states (gaps)": self.gaps,
+            "lost states (DDS)": self.lost,
+        }
+        r.rule(
+            diagnostics.ERROR,
+            len(landers) > 1,
+            f"states of {len(landers)} landers ({', '.join(landers)}): a second simulator "
+            "shares these names",
+        )
+        r.rule(diagnostics.WARN, d["invalid"] > 0, f"{int(d['invalid'])} invalid state(s)")
+        r.rule(diagnostics.WARN, d["gaps"] > 0, f"{int(d['gaps'])} state(s) missing")
+        r.rule(diagnostics.WARN, d["lost"] > 0, f"{int(d['lost'])} state(s) lost")
+        slow = period.size > 0 and pct(period, 99) > diagnostics.SLOW_DECISION_S * 1e3
+        r.rule(diagnostics.WARN, slow, f"decision time p99 {pct(period, 99):.1f} ms")
+        return r
 
     def on_shutdown(self) -> None:
         self.get_logger().info(f"decision time overall: {self.decision_stats()}; {self._counts()}")

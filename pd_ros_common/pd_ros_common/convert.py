@@ -1,7 +1,11 @@
 """Messages <-> numpy, in one place (no logic beyond copying fields).
 
 The physical state is the 7-vector [x, y, z, vx, vy, vz, m] (m, m/s, kg) of pd_core; thrust is a
-3-vector in N; stamps are simulation time (s since the episode started).
+3-vector in N; stamps of the stack's own messages are simulation time (s since the episode
+started). A command, its guidance status and an episode result carry the `lander_id` of the
+simulator run they belong to (the policy echoes the id of the state it answers). The viewer types
+(nav_msgs Odometry and Path, rosgraph_msgs Clock) are stamped with the time the caller gives: the
+continuous simulation clock in lockstep, the node's clock in real time.
 """
 
 from __future__ import annotations
@@ -12,14 +16,15 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Vector3
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
+from nav_msgs.msg import Odometry, Path
+from rosgraph_msgs.msg import Clock
 
 from pd_core.commands import Command
 from pd_core.runtime.decision import SOURCES, Decision
 from pd_interfaces.msg import EpisodeResult, GuidanceStatus, LanderState, ThrustCommand
 from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
-
-FRAME_ID = "landing_site"
+from pd_ros_common.names import CHILD_FRAME_ID, FRAME_ID
 
 
 def vec3(v: Sequence[float] | np.ndarray) -> Vector3:
@@ -50,9 +55,11 @@ def state_vector(position: Vector3, velocity: Vector3, mass: float) -> np.ndarra
 
 # ---------------------------------------------------------------------------------- topics
 def state_msg(
-    episode: int, step: int, time_s: float, state: np.ndarray, status: int
+    episode: int, step: int, time_s: float, state: np.ndarray, status: int, lander_id: str = ""
 ) -> LanderState:
-    msg = LanderState(episode=episode, step=step, mass=float(state[6]), status=int(status))
+    msg = LanderState(
+        episode=episode, step=step, mass=float(state[6]), status=int(status), lander_id=lander_id
+    )
     msg.header.stamp = sim_time(time_s)
     msg.header.frame_id = FRAME_ID
     msg.position = vec3(state[0:3])
@@ -66,8 +73,10 @@ def state_from_msg(msg: Any) -> np.ndarray:
 
 
 def command_msg(state: LanderState, action: int, thrust_n: np.ndarray) -> ThrustCommand:
-    """The command answering `state` (same episode, step, stamp and frame)."""
-    cmd = ThrustCommand(episode=state.episode, step=state.step, action=int(action))
+    """The command answering `state` (same episode, step, stamp, frame and lander_id)."""
+    cmd = ThrustCommand(
+        episode=state.episode, step=state.step, action=int(action), lander_id=state.lander_id
+    )
     cmd.header.stamp = state.header.stamp
     cmd.header.frame_id = state.header.frame_id
     cmd.thrust = vec3(thrust_n)
@@ -86,6 +95,7 @@ def guidance_msg(state: LanderState, d: Decision, decision_time_s: float) -> Gui
         thrust_gain_bound=float(d.thrust_gain_bound),
         nav_filter_engaged=bool(d.nav_filter_engaged),
         decision_time_s=float(decision_time_s),
+        lander_id=state.lander_id,
     )
     msg.header.stamp = state.header.stamp
     msg.header.frame_id = state.header.frame_id
@@ -96,7 +106,7 @@ def command_from_msg(msg: ThrustCommand, source: str = "") -> Command:
     """`source`: the publishing node's name, when the receiver resolved it."""
     t = from_vec3(msg.thrust)
     thrust = tuple(float(v) for v in t)
-    return Command(int(msg.episode), int(msg.step), int(msg.action), thrust, source)
+    return Command(int(msg.episode), int(msg.step), int(msg.action), thrust, source, msg.lander_id)
 
 
 def result_msg(result: dict[str, Any]) -> EpisodeResult:
@@ -106,6 +116,8 @@ def result_msg(result: dict[str, Any]) -> EpisodeResult:
     msg.header.frame_id = FRAME_ID
     for key in ("episode", "steps", "rejected_commands", "missed_commands", "status"):
         setattr(msg, key, int(result[key]))
+    msg.foreign_commands = int(result.get("foreign_commands", 0))
+    msg.lander_id = str(result.get("lander_id", ""))
     for key in ("time_of_flight", "final_mass", "fuel"):
         setattr(msg, key, float(result[key]))
     for key in ("initial_position", "initial_velocity", "final_position", "final_velocity"):
@@ -119,10 +131,82 @@ def final_state(result: EpisodeResult) -> np.ndarray:
     return state_vector(result.final_position, result.final_velocity, result.final_mass)
 
 
+# ---------------------------------------------------------------------------------- viewers
+def ros_time(t_ns: int) -> Time:
+    """A time in integer nanoseconds (the simulation clock, or the node's clock) as a stamp."""
+    t_ns = int(t_ns)
+    return Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+
+
+def odometry_msg(
+    state: np.ndarray, stamp: Time, nav_sigma: Sequence[float] = (0.0, 0.0)
+) -> Odometry:
+    """nav_msgs/Odometry of the lander: position and velocity in FRAME_ID (the child frame's
+    axes are the landing site's: the 3-DOF lander has no attitude, so orientation is identity);
+    covariances the navigation noise's variance (0 = exact), orientation and rates unknown."""
+    msg = Odometry(child_frame_id=CHILD_FRAME_ID)
+    msg.header.stamp = stamp
+    msg.header.frame_id = FRAME_ID
+    msg.pose.pose = _pose(state[0:3])
+    msg.twist.twist.linear = vec3(state[3:6])
+    pos_var, vel_var = float(nav_sigma[0]) ** 2, float(nav_sigma[1]) ** 2
+    pose_cov = np.zeros((6, 6))
+    twist_cov = np.zeros((6, 6))
+    pose_cov[range(3), range(3)] = pos_var
+    twist_cov[range(3), range(3)] = vel_var
+    pose_cov[range(3, 6), range(3, 6)] = -1.0  # unknown (no attitude)
+    twist_cov[range(3, 6), range(3, 6)] = -1.0
+    msg.pose.covariance = pose_cov.reshape(-1).tolist()
+    msg.twist.covariance = twist_cov.reshape(-1).tolist()
+    return msg
+
+
+def _pose(position: Sequence[float] | np.ndarray) -> Pose:
+    p = Pose(orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+    p.position = Point(x=float(position[0]), y=float(position[1]), z=float(position[2]))
+    return p
+
+
+def pose_stamped(position: Sequence[float] | np.ndarray, stamp: Time) -> PoseStamped:
+    msg = PoseStamped(pose=_pose(position))
+    msg.header.stamp = stamp
+    msg.header.frame_id = FRAME_ID
+    return msg
+
+
+def path_msg(poses: Sequence[PoseStamped], stamp: Time) -> Path:
+    """nav_msgs/Path in FRAME_ID of `poses` (PoseStamped, e.g. from `pose_stamped`)."""
+    msg = Path(poses=list(poses))
+    msg.header.stamp = stamp
+    msg.header.frame_id = FRAME_ID
+    return msg
+
+
+def plan_path_msg(response: ComputeTrajectory.Response, start_ns: int) -> Path:
+    """nav_msgs/Path of an OCP answer's states, pose k stamped `start_ns + state_times[k]`."""
+    times_ns = np.round(np.asarray(response.state_times, dtype=float) * 1e9).astype(np.int64)
+    positions = from_vec3_list(response.positions)
+    poses = [
+        pose_stamped(p, ros_time(start_ns + int(t)))
+        for p, t in zip(positions, times_ns, strict=True)
+    ]
+    return path_msg(poses, ros_time(start_ns))
+
+
+def clock_msg(t_ns: int) -> Clock:
+    """rosgraph_msgs/Clock at `t_ns` nanoseconds."""
+    return Clock(clock=ros_time(t_ns))
+
+
 # ---------------------------------------------------------------------------------- services
-def reset_request(state: np.ndarray | None = None, seed: int = -1) -> ResetEpisode.Request:
-    """/sim/reset request: from `state` (7,), or Table 3 sampled (None); seed -1 = RNG goes on."""
-    req = ResetEpisode.Request(use_initial_state=state is not None, seed=int(seed))
+def reset_request(
+    state: np.ndarray | None = None, seed: int = -1, lander_id: str = ""
+) -> ResetEpisode.Request:
+    """/sim/reset request: from `state` (7,), or Table 3 sampled (None); seed -1 = RNG goes on;
+    `lander_id` "" = whichever simulator serves the name (refused when it is ambiguous)."""
+    req = ResetEpisode.Request(
+        use_initial_state=state is not None, seed=int(seed), lander_id=lander_id
+    )
     if state is not None:
         req.position, req.velocity, req.mass = vec3(state[0:3]), vec3(state[3:6]), float(state[6])
     return req

@@ -8,7 +8,10 @@ but it decides what is lost:
 - subscriptions keep as many, so the worst burst the stack itself makes (a lockstep run, a
   replay at full speed, a publisher's whole history after a stall) waits in the queue instead of
   being dropped; what is still dropped is counted (message-lost events and step gaps).
-Episode results are TRANSIENT_LOCAL: a late subscriber still gets the last ones.
+Episode results are TRANSIENT_LOCAL: a late subscriber still gets the last ones; so are the
+paths (lander/path, ocp/plan: depth 1, a viewer started late still draws the last one).
+/diagnostics is RELIABLE, VOLATILE, depth 10 (as diagnostic_updater). /clock is RELIABLE, VOLATILE,
+depth 10: rclpy's own /clock subscription (BEST_EFFORT, depth 1) and any RELIABLE one match it.
 Services keep `SERVICE_DEPTH` requests and responses (the default 10 loses most of a burst).
 """
 
@@ -32,4 +35,7 @@ def _profile(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATIL
 LOOP_PUB_QOS = _profile(HISTORY_DEPTH)  # /lander/state, /lander/thrust_cmd publishers
 LOOP_SUB_QOS = _profile(HISTORY_DEPTH)  # their subscriptions (nodes, recorder, probes)
 EPISODE_QOS = _profile(10, DurabilityPolicy.TRANSIENT_LOCAL)  # /lander/episode
+PATH_QOS = _profile(1, DurabilityPolicy.TRANSIENT_LOCAL)  # lander/path, ocp/plan
+DIAGNOSTICS_QOS = _profile(10)  # /diagnostics
+CLOCK_QOS = _profile(10)  # /clock
 SERVICE_QOS = _profile(SERVICE_DEPTH)  # /sim/reset, /ocp/compute_trajectory (server and client)

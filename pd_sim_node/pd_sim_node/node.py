@@ -17,19 +17,38 @@ the loop up). With `auto_restart`, the next episode starts as soon as one ends.
 The first valid command for a step is flown; later ones for the same step are rejected, counted
 and logged like every invalid command. Every parameter is read at start-up (read-only
 afterwards); defaults are in pd_bringup/config/sim.yaml.
+
+Identity: each run has a `lander_id` (the parameter, or a random one at start-up), carried by
+every lander/state and echoed by the command answering it. A command for another lander (a
+second stack on the same names, without a namespace) is counted as foreign, never flown, and the
+first one of each other lander is logged as an error naming it; /diagnostics is then at ERROR.
+A sim/reset naming another lander is refused (after `REFUSE_DELAY_S`, so the named lander's
+answer reaches the client first), and one naming none is refused while another lander is heard.
+
+For viewers: lander/odom (nav_msgs/Odometry, frame landing_site, child frame lander) with every
+state, lander/path (nav_msgs/Path of the episode so far) every `path_period_s` and when the
+episode ends, and in lockstep /clock (rosgraph_msgs/Clock): a simulation clock that advances
+0.2 s per step and keeps running across episodes (one step between two episodes), so nodes with
+use_sim_time follow the flight. In lockstep the odometry and path are stamped on that clock; in
+real time on the node's clock. /diagnostics (1 Hz): achieved rate, missed, rejected, lost and
+foreign commands (levels: pd_ros_common.diagnostics).
 """
 
 from __future__ import annotations
 
 import re
+import secrets
 import sys
 import threading
 import time
 from typing import Any
 
 import numpy as np
+from nav_msgs.msg import Odometry, Path
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock
 
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S
 from pd_core.sim import (
@@ -42,13 +61,28 @@ from pd_core.sim import (
 from pd_core.ticker import FixedRateTicker, percentiles_ms
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
-from pd_ros_common import names, params, qos
-from pd_ros_common.convert import command_from_msg, result_msg, state_msg, state_vector, vec3
+from pd_ros_common import diagnostics, names, params, qos
+from pd_ros_common.convert import (
+    clock_msg,
+    command_from_msg,
+    odometry_msg,
+    path_msg,
+    pose_stamped,
+    result_msg,
+    ros_time,
+    state_msg,
+    state_vector,
+    vec3,
+)
+from pd_ros_common.diagnostics import ERROR, WARN
 from pd_ros_common.gaps import SequenceGaps
 from pd_ros_common.run import run_node
 from pd_ros_common.sources import PublisherNames
 
 NODE_NAME = "pd_sim_node"
+AMBIGUOUS_S = 5.0  # a reset naming no lander is refused this long after a foreign command
+REFUSE_DELAY_S = 1.0  # a reset for another lander is refused this much later
+DT_NS = round(DT_S * 1e9)  # one step of the simulation clock
 
 # name: (default, description); every one is read at start-up.
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -141,6 +175,17 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "counted, even when they answer a step first. Empty = any publisher (first command "
         "wins).",
     ),
+    "lander_id": (
+        "",
+        "Identity of this simulator run, carried by every lander/state and echoed by the "
+        "commands answering it; commands for another id are counted as foreign and never "
+        "flown. Empty = a random 8-hex-digit id at start-up.",
+    ),
+    "path_period_s": (
+        1.0,
+        "Publish lander/path (nav_msgs/Path of the episode so far) every this many seconds "
+        "of wall clock while flying; it is always published when an episode ends. 0 = only then.",
+    ),
 }
 
 CHECKS: dict[str, params.Check] = {
@@ -171,6 +216,12 @@ CHECKS: dict[str, params.Check] = {
         if re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)?", v)
         else "must be a node name (letters, digits, underscores) or empty"
     ),
+    "lander_id": lambda v: (
+        None
+        if re.fullmatch(r"[A-Za-z0-9_.-]{0,64}", v)
+        else "must be at most 64 letters, digits, '_', '.' or '-' (empty = random)"
+    ),
+    "path_period_s": params.at_least(0.0),
 }
 
 
@@ -190,6 +241,8 @@ class SimNode(Node):
         self.auto_restart = p["auto_restart"]
         self.log_rejections = p["log_rejections"]
         self.tick_priority = p["tick_priority"]
+        self.lander_id = p["lander_id"] or secrets.token_hex(4)
+        self._nav_sigma = (p["nav_position_sigma_m"], p["nav_velocity_sigma_mps"])
         self._sim = Simulator(
             disturbance=p["disturbance"],
             missing_command=p["missing_command"],
@@ -199,6 +252,7 @@ class SimNode(Node):
             delay_steps=p["delay_steps"],
             nav_sigma=(p["nav_position_sigma_m"], p["nav_velocity_sigma_mps"]),
             thrust_scale=p["thrust_scale"],
+            lander_id=self.lander_id,
         )
         self._restart_due = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command
@@ -209,6 +263,11 @@ class SimNode(Node):
         self._sources = PublisherNames(
             lambda: self.get_publishers_info_by_topic(self._cmd_sub.topic_name)
         )
+        self._foreign_at = -float("inf")  # monotonic time of the last foreign command
+        self._clock_ns = 0  # simulation clock: dt per step, across episodes (integer ns)
+        self._path: list[Any] = []  # PoseStamped of the episode so far
+        self._path_key: tuple[int, int] = (0, -1)  # (episode, step) of the last pose
+        self._path_sent = 0  # poses in the last lander/path published
 
         self._state_pub = self.create_publisher(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS)
         self._episode_pub = self.create_publisher(
@@ -224,6 +283,21 @@ class SimNode(Node):
         self.create_service(
             ResetEpisode, names.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS
         )
+        self._odom_pub = self.create_publisher(Odometry, names.ODOM_TOPIC, qos.LOOP_PUB_QOS)
+        self._path_pub = self.create_publisher(Path, names.PATH_TOPIC, qos.PATH_QOS)
+        self._clock_pub = (
+            self.create_publisher(Clock, names.CLOCK_TOPIC, qos.CLOCK_QOS)
+            if self.lockstep
+            else None
+        )
+        if p["path_period_s"] > 0:
+            self.create_timer(p["path_period_s"], self._path_timer)
+        self._since = diagnostics.Since()
+        self._diag_at = time.monotonic()
+        self._diag_flying = False
+        self.diagnostics = diagnostics.Diagnostics(
+            self, "simulator", self._report, hardware_id=self.lander_id
+        )
         self._links = (-1, -1)
         self.create_timer(0.1, self._log_links)
         self.create_timer(min(self.resend_s or 0.5, 0.5) / 2, self._resend_check)
@@ -232,7 +306,8 @@ class SimNode(Node):
         self.get_logger().info(
             f"simulator ready: {mode}, missing_command={p['missing_command']}, "
             f"disturbance={p['disturbance']}, seed={p['seed']}, "
-            f"command_source={p['command_source'] or '(any publisher)'}"
+            f"command_source={p['command_source'] or '(any publisher)'}, "
+            f"lander_id={self.lander_id}"
         )
         if p["autostart"]:
             init = p["initial_state"]
@@ -268,6 +343,10 @@ class SimNode(Node):
         episode, init, interrupted = self._sim.reset(initial_state, seed)
         if interrupted is not None:
             self._publish_result(interrupted)
+        if self._sim.counters.episodes_started > 1:
+            self._clock_ns += DT_NS  # the clock keeps running: one step between two episodes
+        self._path = []
+        self._path_sent = 0
         self._restart_due = False
         self.get_logger().info(
             f"episode {episode} starts at x = {np.round(init[0:3], 2).tolist()} m, "
@@ -329,6 +408,7 @@ class SimNode(Node):
     def _advance(self) -> None:
         """One step with whatever command the simulator holds; publish state and result."""
         out = self._sim.advance()
+        self._clock_ns += DT_NS
         self._publish_state()
         if not out.done:
             return
@@ -341,10 +421,38 @@ class SimNode(Node):
 
     def _publish_state(self) -> None:
         s = self._sim
-        self._state_pub.publish(state_msg(s.episode, s.step, s.time_s, s.observed_state, s.status))
+        observed = s.observed_state
+        self._state_pub.publish(
+            state_msg(s.episode, s.step, s.time_s, observed, s.status, self.lander_id)
+        )
         self._last_publish = time.monotonic()
+        stamp = self._stamp()
+        if self._clock_pub is not None:
+            self._clock_pub.publish(clock_msg(self._clock_ns))
+        self._odom_pub.publish(odometry_msg(observed, stamp, self._nav_sigma))
+        if (s.episode, s.step) != self._path_key:  # not again for a resend
+            self._path_key = (s.episode, s.step)
+            self._path.append(pose_stamped(observed[0:3], stamp))
+
+    def _stamp(self) -> Any:
+        """Stamp of the viewer messages: the simulation clock in lockstep, else the node's."""
+        if self.lockstep:
+            return ros_time(self._clock_ns)
+        return self.get_clock().now().to_msg()
+
+    def _publish_path(self) -> None:
+        """lander/path of the episode so far (caller holds the lock)."""
+        if self._path:
+            self._path_pub.publish(path_msg(self._path, self._path[-1].header.stamp))
+            self._path_sent = len(self._path)
+
+    def _path_timer(self) -> None:
+        with self._lock:
+            if self._sim.flying and len(self._path) != self._path_sent:
+                self._publish_path()
 
     def _publish_result(self, result: dict[str, Any]) -> None:
+        self._publish_path()
         self._episode_pub.publish(result_msg(result))
         c = self._sim.counters
         if self._ticker is not None:
@@ -357,9 +465,10 @@ class SimNode(Node):
             f"episode {result['episode']} ended after {result['steps']} steps "
             f"({result['time_of_flight']:.1f} s): {result['reason']}; fuel "
             f"{result['fuel']:.1f} kg; commands rejected {result['rejected_commands']}, "
-            f"missed {result['missed_commands']} (totals: accepted {c.accepted_commands}, "
-            f"rejected {c.rejected_commands}, missed {c.missed_commands}, "
-            f"lost {self.lost_commands}){jitter}"
+            f"missed {result['missed_commands']}, foreign {result['foreign_commands']} "
+            f"(totals: accepted {c.accepted_commands}, rejected {c.rejected_commands}, missed "
+            f"{c.missed_commands}, lost {self.lost_commands}, foreign {c.foreign_commands})"
+            f"{jitter}"
         )
 
     # ------------------------------------------------------------------ callbacks
@@ -370,7 +479,22 @@ class SimNode(Node):
         source = self._sources.name_of(info) if self._sim.command_source else ""
         cmd = command_from_msg(msg, source)
         with self._lock:
+            known = cmd.lander_id in self._sim.counters.foreign_by_lander
             err = self._sim.submit(cmd)
+            if (
+                err is not None
+                and err[0] == "foreign"
+                and cmd.lander_id not in ("", self.lander_id)
+            ):
+                self._foreign_at = time.monotonic()
+                if not known:  # once per other lander: it is a set-up error, not a command's
+                    self.get_logger().error(
+                        f"commands for lander {cmd.lander_id!r} arrive on "
+                        f"{self._cmd_sub.topic_name}; this is lander {self.lander_id!r}: a second "
+                        "stack shares these names (give each its own namespace, -r "
+                        "__ns:=/vehicle2). Its commands are counted as foreign, never flown"
+                    )
+                return
             if err is not None:
                 n = self._sim.counters.rejected_commands
                 if n <= self.log_rejections or n % 100 == 0:
@@ -408,9 +532,29 @@ class SimNode(Node):
                     )
                 self._publish_state()
 
-    def _on_reset(
+    async def _on_reset(
         self, request: ResetEpisode.Request, response: ResetEpisode.Response
     ) -> ResetEpisode.Response:
+        response.lander_id = self.lander_id
+        why = None
+        if request.lander_id and request.lander_id != self.lander_id:
+            why = (
+                f"reset refused: it is for lander {request.lander_id!r}, this is {self.lander_id!r}"
+            )
+            await self._sleep(REFUSE_DELAY_S)  # the named lander answers first
+        elif not request.lander_id and time.monotonic() - self._foreign_at < AMBIGUOUS_S:
+            with self._lock:
+                others = ", ".join(sorted(self._sim.counters.foreign_by_lander))
+            why = (
+                f"reset refused: ambiguous, lander {self.lander_id!r} shares its names with "
+                f"{others}; name the lander (ResetEpisode.lander_id)"
+            )
+        if why is not None:
+            response.success = False
+            response.message = why
+            response.episode = self._sim.episode
+            self.get_logger().warning(why)
+            return response
         state = None
         if request.use_initial_state:
             state = state_vector(request.position, request.velocity, request.mass)
@@ -432,6 +576,81 @@ class SimNode(Node):
         response.velocity = vec3(init[3:6])
         response.mass = float(init[6])
         return response
+
+    async def _sleep(self, seconds: float) -> None:
+        """Wait without blocking the executor (a one-shot timer completes a future)."""
+        done: Future = Future()
+
+        def fire() -> None:
+            timer.cancel()
+            if not done.done():
+                done.set_result(None)
+
+        timer = self.create_timer(seconds, fire)
+        try:
+            await done
+        finally:
+            self.destroy_timer(timer)
+
+    def _report(self) -> diagnostics.Report:
+        """/diagnostics of the last period (rules: pd_ros_common.diagnostics)."""
+        now = time.monotonic()
+        with self._lock:
+            s, c = self._sim, self._sim.counters
+            flying = s.flying
+            d = self._since(
+                steps=c.steps,
+                missed=c.missed_commands,
+                rejected=c.rejected_commands,
+                foreign=c.foreign_commands,
+                lost=self.lost_commands,
+            )
+            others = sorted(c.foreign_by_lander)
+            by_reason = dict(c.rejected_by_reason)
+            episode, step = s.episode, s.step
+            totals = (c.steps, c.accepted_commands, c.missed_commands, c.rejected_commands)
+            foreign_total = c.foreign_commands
+        period = now - self._diag_at
+        rate = d["steps"] / period if period > 0 else 0.0
+        whole_period = flying and self._diag_flying and not self.lockstep
+        self._diag_at, self._diag_flying = now, flying
+        r = diagnostics.Report(ok_message="flying" if flying else "idle")
+        r.values = {
+            "lander_id": self.lander_id,
+            "mode": "lockstep" if self.lockstep else "real time",
+            "rate_hz (target)": self.rate_hz if not self.lockstep else 0.0,
+            "achieved rate (steps/s)": rate,
+            "episode": episode,
+            "step": step,
+            "flying": flying,
+            "steps": totals[0],
+            "accepted commands": totals[1],
+            "missed commands": totals[2],
+            "missed (last period)": int(d["missed"]),
+            "rejected commands": totals[3],
+            "rejected (last period)": int(d["rejected"]),
+            "rejected by reason": ", ".join(f"{k} {v}" for k, v in sorted(by_reason.items()))
+            or "none",
+            "lost commands": self.lost_commands,
+            "foreign commands": foreign_total,
+            "foreign (last period)": int(d["foreign"]),
+            "other landers": others or "none",
+        }
+        r.rule(
+            ERROR,
+            d["foreign"] > 0,
+            f"{int(d['foreign'])} command(s) for other lander(s) {', '.join(others)}: a second "
+            "stack shares these names",
+        )
+        r.rule(WARN, d["missed"] > 0, f"{int(d['missed'])} step(s) flown without a command")
+        r.rule(WARN, d["rejected"] > 0, f"{int(d['rejected'])} command(s) rejected")
+        r.rule(WARN, d["lost"] > 0, f"{int(d['lost'])} command(s) lost")
+        r.rule(
+            WARN,
+            whole_period and rate < diagnostics.RATE_SHORTFALL * self.rate_hz,
+            f"achieved {rate:.2f} steps/s of {self.rate_hz:g}",
+        )
+        return r
 
     def destroy_node(self) -> None:
         with self._lock:
