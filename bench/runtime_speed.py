@@ -7,7 +7,9 @@ ZEM/ZEV, per decision and per campaign, side by side in one run, with the ratios
 2. A one-process nominal campaign (`pd_core.experiments.campaign.run_campaign`, 1024 landers
    per batch) in episodes/min: the shipped file, its bare network, ZEM/ZEV.
 
-BLAS and numba are held to one thread: "one process" is one core.
+BLAS and numba are held to one thread: "one process" is one core. The first line says which
+implementation ran (the layer's compiled kernels, `pd_core.runtime.kernels`, and the network's
+forward) and what loading the file cost (weights, and the kernels from numba's cache or compiled).
 
     python bench/runtime_speed.py [--episodes 4096] [--decisions 5000]
 """
@@ -48,13 +50,36 @@ def per_decision_us(call, states: np.ndarray, repeats: int) -> np.ndarray:
     return 1e6 * np.array(out)
 
 
+def implementation(rt: Runtime, load_s: float) -> str:
+    """One line: what runs a decision, and what loading the policy file took."""
+    net = type(rt.actor).__name__ + f" {getattr(rt.actor, 'dtype', '')}".rstrip()
+    try:
+        import numba  # noqa: PLC0415  (imported by the layer already)
+
+        from pd_core.runtime import kernels  # noqa: PLC0415
+    except ImportError:  # a tree from before the kernels
+        layer = "runtime layer numpy"
+    else:
+        compiled = sorted(
+            name for name, f in vars(kernels).items() if getattr(f, "signatures", None)
+        )
+        layer = f"runtime layer numba {numba.__version__} kernels ({', '.join(compiled)})"
+    return (
+        f"implementation: {layer}, network {net} (numpy {np.__version__}); "
+        f"load_policy {load_s:.2f} s (weights, and any kernels compiled or from numba's cache)"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--episodes", type=int, default=4096, help="campaign episodes per agent")
     ap.add_argument("--decisions", type=int, default=5000, help="timed single decisions")
     args = ap.parse_args()
 
+    t0 = time.perf_counter()
     rt = load_policy(SHIPPED)
+    load_s = time.perf_counter() - t0
+    print(implementation(rt, load_s) + "\n")
     path = rollout(rt, 1, 0, keep_trajectories=1).trajectories[0][:-1]  # one nominal flight
     repeats = max(1, args.decisions // len(path))
     zz = Runtime(make_controller("zemzev-vernier"), RuntimeConfig.off())

@@ -19,28 +19,28 @@ once per window instead of every step).
 
 Where the navigation is noisy the prediction starts from the navigation filter's estimate
 (`pd_core.runtime.navfilter`, fed with the command this lag and matrix say the plant flew).
-Settings: `pd_core.runtime.config.LatencyConfig`; one lander per row (`RowMemory`).
+Settings: `pd_core.runtime.config.LatencyConfig`; one lander per row (`RowMemory`). The arithmetic,
+row by row, is compiled: `pd_core.runtime.kernels` (`predict_rows`, `_observe_row`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from pd_core.config import DT_S, GRAVITY_MPS2
-from pd_core.dynamics import step
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig
+from pd_core.runtime.kernels import (
+    consts,
+    lag_residuals_rows,
+    predict_rows,
+    record_rows,
+    thrust_scale_rows,
+    window_bounds,
+)
 from pd_core.runtime.navfilter import NavFilter
 from pd_core.runtime.rowmemory import RowMemory
 
-
-def propagate(states: np.ndarray, queued_thrust_n: np.ndarray, dt_s: float = DT_S) -> np.ndarray:
-    """States (B, 7) carried through the commands (B, d, 3), N, oldest first, on the nominal
-    dynamics without disturbance: where a command issued now will find the lander."""
-    s = np.array(states, dtype=float)
-    zero = np.zeros((len(s), 3))
-    for k in range(queued_thrust_n.shape[1]):
-        s = step(s, queued_thrust_n[:, k], zero, dt_s)
-    return s
+_CONSTS = consts()
+_IDENTITY = np.eye(3)[None, None]
 
 
 def lag_residuals(
@@ -48,32 +48,21 @@ def lag_residuals(
     mass_kg: np.ndarray,
     issued_n: np.ndarray,
     gain: np.ndarray | None = None,
-    dt_s: float = DT_S,
 ) -> np.ndarray:
     """(B, L) squared norm of the observed velocity change (B, 3) over the last step minus the one
     each lag would give: lag d applies `issued_n[:, d]` (B, L, 3), the command issued d + 1
     steps before now, through the thrust matrix `gain[:, d]` (B, L, 3, 3; None: identity), on
-    landers of mass (B,) kg."""
-    delivered = issued_n if gain is None else np.einsum("blij,blj->bli", gain, issued_n)
-    expected = (delivered / mass_kg[:, None, None] + GRAVITY_MPS2) * dt_s
-    return ((dv_mps[:, None, :] - expected) ** 2).sum(axis=-1)
-
-
-def update_thrust_matrix(
-    gain: np.ndarray,
-    cov: np.ndarray,
-    command_n: np.ndarray,
-    force_n: np.ndarray,
-    noise_var_n2: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One Kalman step of delivered force = gain @ command (per row and lag; each output axis an
-    independent measurement with the same regressor): gain (..., 3, 3), the covariance of each
-    of its rows cov (..., 3, 3), the command (..., 3), the force measured over the step (..., 3)
-    and its noise variance (...), N^2. A zero command carries no information."""
-    pu = np.einsum("...ij,...j->...i", cov, command_n)
-    k = pu / (noise_var_n2 + np.einsum("...i,...i->...", command_n, pu))[..., None]
-    err = force_n - np.einsum("...ij,...j->...i", gain, command_n)
-    return gain + err[..., :, None] * k[..., None, :], cov - k[..., :, None] * pu[..., None, :]
+    landers of mass (B,) kg (`pd_core.runtime.kernels.lag_residual`)."""
+    issued = np.ascontiguousarray(issued_n, dtype=float)
+    g = _IDENTITY if gain is None else np.ascontiguousarray(gain, dtype=float)
+    return lag_residuals_rows(
+        np.ascontiguousarray(dv_mps, dtype=float),
+        np.ascontiguousarray(mass_kg, dtype=float),
+        issued,
+        g,
+        gain is not None,
+        _CONSTS,
+    )
 
 
 def window_gain_bound(
@@ -87,12 +76,15 @@ def window_gain_bound(
     """Upper bound (estimate + n_sd standard deviations) of the vertical gain from the windows'
     forgetting sums: sxx of the commanded velocity change squared, sxy of it times the observed
     one, syy of the squared residuals, n of the windows ((m/s)^2, (m/s)^2, (m/s)^2, count);
-    infinite where there is less evidence than `cfg.window_min_evidence`."""
-    enough = sxx >= cfg.window_min_evidence
-    safe = np.where(enough, sxx, 1.0)
-    noise_var = (syy + 2.0 * cfg.window_noise_mps**2) / (n + 2.0)
-    bound = sxy / safe + n_sd * np.sqrt(noise_var / safe)
-    return np.where(enough, bound, np.inf)
+    infinite where there is less evidence than `cfg.window_min_evidence`. The noise variance of
+    a window is (syy + 2 window_noise^2) / (n + 2) (`pd_core.runtime.kernels.window_bound`)."""
+    sums = [np.ascontiguousarray(v, dtype=float).reshape(-1) for v in (sxx, sxy, syy, n)]
+    return window_bounds(*sums, float(n_sd), *_window_settings(cfg))
+
+
+def _window_settings(cfg: LatencyConfig) -> tuple[float, float]:
+    """(minimum evidence, 2 window_noise^2): the window bound's settings, as kernels take them."""
+    return float(cfg.window_min_evidence), 2.0 * cfg.window_noise_mps**2
 
 
 class LatencyCompensator(RowMemory):
@@ -108,6 +100,18 @@ class LatencyCompensator(RowMemory):
         self.nav = NavFilter(nav, n_rows) if nav.enabled else None
         """the navigation filter the prediction starts from (None: the observed state)"""
         self._cov0 = np.eye(3) * cfg.thrust_matrix_prior_sd**2
+        self._params = np.array(
+            [
+                cfg.max_delay_steps, cfg.thrust_model, cfg.forget_per_step,
+                cfg.switch_margin_mps2, cfg.jump_m, cfg.window_steps, cfg.window_forget,
+            ],
+            dtype=float,
+        )  # fmt: skip
+        """the kernels' settings (`pd_core.runtime.kernels`, latency parameters)"""
+        self._window = _window_settings(cfg)
+        nav_off = NavFilter(nav, 0)
+        self._no_nav = nav_off.state()
+        """the navigation memory the kernels are given where there is no filter (no rows)"""
         self.reset(n_rows)
 
     def reset(self, n_rows: int) -> None:
@@ -149,52 +153,40 @@ class LatencyCompensator(RowMemory):
 
     def predict(self, observed: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """States (B, 7) the next commands of rows (B,) will meet, given their observed states
-        (B, 7); updates each row's lag estimate with the velocity change it just saw."""
+        (B, 7); updates each row's lag estimate with the velocity change it just saw. A row
+        observed more than `jump_m` from where it was heading starts a new episode (cleared)."""
         rows = np.asarray(rows, dtype=np.int64)
-        obs = np.asarray(observed, dtype=float).reshape(-1, 7)
+        obs = np.ascontiguousarray(observed, dtype=float).reshape(-1, 7)
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
         if self.max_delay_steps == 0 and self.nav is None:
             self._last[rows] = obs
             return obs
-        last = self._last[rows]
-        seen = ~np.isnan(last[:, 0])
-        heading = last[:, 0:3] + last[:, 3:6] * DT_S
-        jumped = seen & (np.linalg.norm(obs[:, 0:3] - heading, axis=1) > self.cfg.jump_m)
-        if jumped.any():
+        out = np.empty_like(obs)
+        jumped = np.empty(len(rows), dtype=bool)
+        nav = self._no_nav if self.nav is None else self.nav.state()
+        while not predict_rows(
+            rows, obs, out, jumped, self._issued, self._last, self._score, self.delay_steps,
+            self.gain, self._cov, self.force_noise_var, self._win, self._win_steps,
+            self._win_sums, self._params, self.nav is not None, *nav,
+        ):  # fmt: skip
             self.clear(rows[jumped])
-            seen &= ~jumped
-        if seen.any() and self.max_delay_steps > 0:
-            self._observe(rows[seen], obs[seen, 3:6] - last[seen, 3:6], last[seen, 6])
-        self._last[rows] = obs
-        out = (
-            obs.copy()
-            if self.nav is None
-            else self.nav.estimate(obs, rows, self.applied(rows, obs))
-        )
-        start = out.copy()
-        for d in range(1, self.max_delay_steps + 1):
-            sel = self.delay_steps[rows] == d
-            if sel.any():
-                queued = self._issued[rows[sel], :d][:, ::-1]  # oldest first
-                if self.thrust_model:
-                    g = self.gain[rows[sel], d][:, None]
-                    queued = np.einsum("bkij,bkj->bki", g, queued)
-                out[sel] = propagate(start[sel], queued)
         return out
 
     def vertical_thrust_scale(self, rows: np.ndarray, n_sd: float | None = None) -> np.ndarray:
         """(B,) delivered over commanded vertical thrust of rows (B,) as far as the evidence
         shows it short: their lag's identified vertical gain (the thrust error and the
         misalignment's cosine together) plus `n_sd` of its standard deviation, so an engine
-        that delivers what it should reads >= 1 (1 where nothing is identified)."""
+        that delivers what it should reads >= 1 (1 where nothing is identified), or the window
+        bound (`window_gain_bound`) where lower."""
         rows = np.asarray(rows, dtype=np.int64)
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
         if self.max_delay_steps == 0 or not self.thrust_model:
             return np.ones(len(rows))
         n_sd = self.cfg.shortfall_sd if n_sd is None else n_sd
-        _, gain, sd = self._vertical_gain(rows)
-        sums = self._win_sums[rows]
-        return np.minimum(gain + n_sd * sd, window_gain_bound(*sums.T, n_sd, self.cfg))
+        return thrust_scale_rows(
+            rows, self.delay_steps, self.gain, self._cov, self._win_sums, float(n_sd),
+            *self._window,
+        )  # fmt: skip
 
     def _vertical_gain(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(lag, identified vertical gain, its standard deviation), each (B,), of rows (B,)."""
@@ -237,70 +229,8 @@ class LatencyCompensator(RowMemory):
         sd = np.sqrt(self.nav.noise_var[row])
         return out + f", navigation filter on (noise {sd[0]:.1f} m, {sd[1]:.2f} m/s)"
 
-    def applied(self, rows: np.ndarray, states: np.ndarray) -> np.ndarray:
-        """Acceleration (B, 3), m/s^2, that the command each row's lag says the plant flew over
-        the last step gives landers in states (B, 7) (its thrust matrix applied)."""
-        lag = self.delay_steps[rows]
-        cmd = self._issued[rows, lag]
-        if self.thrust_model:
-            cmd = np.einsum("bij,bj->bi", self.gain[rows, lag], cmd)
-        return cmd / states[:, 6:7] + GRAVITY_MPS2
-
-    def _observe(self, r: np.ndarray, dv_mps: np.ndarray, mass_kg: np.ndarray) -> None:
-        """Rows r saw the velocity change dv (B, 3) over the last step, at mass (B,): score the
-        lags, identify their thrust matrices, move the lag estimate where the evidence says."""
-        gain = self.gain[r] if self.thrust_model else None
-        res = lag_residuals(dv_mps, mass_kg, self._issued[r], gain)
-        if self.thrust_model:
-            m = mass_kg[:, None]
-            force = m * (dv_mps / DT_S - GRAVITY_MPS2)
-            var = (
-                self.forget * self.force_noise_var[r]
-                + (1.0 - self.forget) * res * (m / DT_S) ** 2 / 3.0
-            )
-            self.force_noise_var[r] = var
-            self.gain[r], self._cov[r] = update_thrust_matrix(
-                self.gain[r], self._cov[r], self._issued[r], force[:, None, :], var
-            )
-        score = self.forget * self._score[r] + res
-        self._score[r] = score
-        best = np.argmin(score, axis=1)
-        now = self.delay_steps[r]
-        k = np.arange(len(r))
-        switch = score[k, best] < score[k, now] - self.margin
-        self.delay_steps[r] = np.where(switch, best, now)
-        if self.thrust_model:
-            self._observe_window(r, dv_mps[:, 2], mass_kg)
-
-    def _observe_window(self, r: np.ndarray, dvz_mps: np.ndarray, mass_kg: np.ndarray) -> None:
-        """Add the last step to rows r's window: the vertical velocity change the lag's vertical
-        command gives at nominal thrust, and the one observed less gravity and less what its
-        lateral commands give upwards through the identified matrix (misalignment); a full
-        window goes into the forgetting sums (`window_gain_bound`)."""
-        lag = self.delay_steps[r]
-        cmd = self._issued[r, lag]
-        sideways = np.einsum("bj,bj->b", self.gain[r, lag, 2, 0:2], cmd[:, 0:2])
-        commanded = cmd[:, 2] / mass_kg * DT_S
-        observed = dvz_mps - (GRAVITY_MPS2[2] + sideways / mass_kg) * DT_S
-        self._win[r] += np.stack([commanded, observed], axis=1)
-        self._win_steps[r] += 1
-        done = r[self._win_steps[r] >= self.cfg.window_steps]
-        if not len(done):
-            return
-        x, y = self._win[done].T
-        sums = self.cfg.window_forget * self._win_sums[done]
-        sums[:, 0] += x * x
-        sums[:, 1] += x * y
-        gain = np.where(sums[:, 0] > 0.0, sums[:, 1] / np.maximum(sums[:, 0], 1e-12), 1.0)
-        sums[:, 2] += (y - gain * x) ** 2
-        sums[:, 3] += 1.0
-        self._win_sums[done] = sums
-        self._win[done] = 0.0
-        self._win_steps[done] = 0
-
     def record(self, rows: np.ndarray, thrust_n: np.ndarray) -> None:
         """The commands (B, 3), N, just issued for rows (B,)."""
         rows = np.asarray(rows, dtype=np.int64)
-        self._issued[rows] = np.concatenate(
-            [np.asarray(thrust_n, dtype=float)[:, None], self._issued[rows, :-1]], axis=1
-        )
+        thrust = np.ascontiguousarray(thrust_n, dtype=float).reshape(-1, 3)
+        record_rows(self._issued, rows, thrust)

@@ -14,7 +14,9 @@ Each step, for each lander (row):
 
 A `Runtime` built with `RuntimeConfig.off()` flies the actor alone. The node, `pd-eval`,
 campaigns and tests all fly a policy file through this class (`load_policy`); `bare_action` is
-the network alone and says so. Imports numpy only.
+the network alone and says so. Imports numpy, and numba for the layer's compiled arithmetic
+(`pd_core.runtime.kernels`, compiled or loaded from numba's cache once per process when the
+first `Runtime` is built).
 """
 
 from __future__ import annotations
@@ -24,14 +26,46 @@ from typing import Any, Protocol
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
-from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision, Decisions
+from pd_core.runtime.kernels import states_valid
 from pd_core.runtime.latency import LatencyCompensator
-from pd_core.runtime.rules import apply_rules, delivered_fraction
-from pd_core.state import check_state
+from pd_core.runtime.rules import decide, rule_settings
+from pd_core.state import MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG, check_state
 from pd_core.teachers.zemzev import ZemZevController
 
 _ROW0 = np.zeros(1, dtype=np.int64)
+_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
+
+
+def _observed(states: np.ndarray) -> np.ndarray:
+    """States (B, 7) as floats, or `check_state`'s ValueError saying what is wrong with them."""
+    s = np.asarray(states, dtype=float)
+    if s.shape[-1:] == (7,):
+        s = np.ascontiguousarray(s.reshape(-1, 7))
+        if states_valid(s, _LIMITS):
+            return s
+    return check_state(states).reshape(-1, 7)
+
+
+def _warm_up(fallback: ZemZevController) -> None:
+    """Compile every kernel a decision calls (or load it from numba's cache next to
+    `pd_core.runtime.kernels`), once per process: a policy loaded at start-up decides at full
+    speed from its first step."""
+    global _WARM
+    if _WARM:
+        return
+    s = np.array([[0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0]])
+    rows = np.zeros(1, dtype=np.int64)
+    lat = LatencyCompensator(LatencyConfig(), NavFilterConfig())
+    lat.predict(_observed(s), rows)
+    scale = lat.vertical_thrust_scale(rows)
+    lat.record(rows, np.zeros((1, 3)))
+    decide(rule_settings(RulesConfig(), DEFAULT_ACTIONS), rows, s, fallback, scale)
+    _WARM = True
+
+
+_WARM = False
 
 
 class Actor(Protocol):
@@ -56,11 +90,13 @@ class Runtime:
         self.metadata = metadata or {}
         """the policy file's metadata (empty for a controller)"""
         self.fallback = ZemZevController(config.fallback, space)
+        self._rules = rule_settings(config.rules, space, self.fallback.params)
         memory = config.latency.max_delay_steps > 0 or config.nav_filter.enabled
         self.latency = LatencyCompensator(config.latency, config.nav_filter) if memory else None
         """the prediction stage's memory (None: decide on the observed state)"""
         self.counts = dict.fromkeys(SOURCES, 0)
         """steps decided by each source since construction (`Decision.source`)"""
+        _warm_up(self.fallback)
 
     def begin_episodes(self, n: int) -> None:
         """Rows 0..n-1 start new episodes (their memory is cleared)."""
@@ -73,7 +109,7 @@ class Runtime:
 
     def step_rows(self, states: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, Decisions]:
         """(actions (B,), their decisions) for the observed states (B, 7) of rows (B,)."""
-        observed = check_state(states).reshape(-1, 7)
+        observed = _observed(states)
         rows = np.asarray(rows, dtype=np.int64)
         lat = self.latency
         if lat is None:
@@ -82,22 +118,21 @@ class Runtime:
             decided = lat.predict(observed, rows)
             scale = lat.vertical_thrust_scale(rows)
         proposed = np.asarray(self.actor.act_batch(decided), dtype=np.int64).reshape(-1)
-        actions, source = apply_rules(
-            proposed, decided, self.actions, self.config.rules, self.fallback, scale
-        )
-        if lat is not None:
-            lat.record(rows, self.actions.table_n[actions])
+        actions, source, frac = decide(self._rules, proposed, decided, self.fallback, scale)
         n = len(rows)
-        for k, c in enumerate(np.bincount(source, minlength=len(SOURCES))):
-            self.counts[SOURCES[k]] += int(c)
-        return actions, Decisions(
-            actions,
-            proposed,
-            source,
-            np.zeros(n, dtype=np.int64) if lat is None else lat.delay_steps[rows].copy(),
-            delivered_fraction(scale, n, self.config.rules),
-            np.zeros(n, dtype=bool) if lat is None or lat.nav is None else lat.nav.engaged[rows],
-        )
+        if lat is None:
+            delay, nav = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
+        else:
+            lat.record(rows, self._rules.table_n[actions])
+            delay = lat.delay_steps[rows]
+            nav = np.zeros(n, dtype=bool) if lat.nav is None else lat.nav.engaged[rows]
+        counts = self.counts
+        if n == 1:
+            counts[SOURCES[source[0]]] += 1
+        else:
+            for k, c in enumerate(np.bincount(source, minlength=len(SOURCES)).tolist()):
+                counts[SOURCES[k]] += c
+        return actions, Decisions(actions, proposed, source, delay, frac, nav)
 
     def act_rows(self, states: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Actions (B,) for the observed states (B, 7) of rows (B,) (`step_rows` without the

@@ -22,24 +22,67 @@ On the state decided on (physical [x, y, z, vx, vy, vz, m], SI), in this order:
 
 `apply_rules` returns the action flown and who decided it (`pd_core.runtime.decision`).
 Settings: `pd_core.runtime.config.RulesConfig`; the evidence behind each number is in
-`docs/experiments/runtime-layer-history.md`.
+`docs/experiments/runtime-layer-history.md`. The arithmetic, lander by lander, is compiled
+(`pd_core.runtime.kernels`: `brake_row`, `guard_row`, `handover_row`, `rules_rows`); the functions
+here take arrays of landers.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, GRAVITY_MPS2
+from pd_core.runtime import kernels
 from pd_core.runtime.config import RulesConfig
-from pd_core.runtime.decision import BRAKE, GUARD, HANDOVER, NETWORK
-from pd_core.teachers.zemzev import (
-    ZemZevController,
-    braking_accel_mps2,
-    lateral_brake_accel_mps2,
-)
+from pd_core.teachers.zemzev import ZemZevController, ZemZevParams
 
-_G_MPS2 = float(-GRAVITY_MPS2[2])
+
+class RuleSettings(NamedTuple):
+    """A `RulesConfig`, an action space and a fallback as the kernels take them (built once by
+    `rule_settings`)."""
+
+    params: np.ndarray
+    """(17,) floats: see `pd_core.runtime.kernels`, rule parameters"""
+    level_table: np.ndarray
+    """(n, 3) int64 levels of each action"""
+    table_n: np.ndarray
+    """(n, 3) thrust of each action, N"""
+    n_per_axis: np.ndarray
+    """(3,) int64"""
+    hi: np.ndarray
+    """(3,) the largest thrust on each axis, N"""
+
+
+def rule_settings(
+    p: RulesConfig, space: ActionSpace, fallback: ZemZevParams | None = None
+) -> RuleSettings:
+    """The kernels' settings of the rules `p` over `space`, with the fallback's braking profile
+    `fallback` (its handover condition; default gains where None)."""
+    f = fallback or ZemZevParams()
+    raised = float(space.levels_to_thrust(np.array([0, 0, 1]))[2])
+    params = np.array(
+        [
+            p.enabled, p.thrust_margin, p.land_speed_mps, p.touchdown_speed_mps,
+            p.measured_thrust, p.min_measured_thrust, p.guard_altitude_m, p.guard_climb_mps2,
+            p.handover_altitude_m, p.handover_mass_kg, f.brake_accel_mps2, f.brake_margin,
+            f.land_speed_mps, f.min_brake_accel_mps2, raised, float(-GRAVITY_MPS2[2]), DT_S,
+        ],
+        dtype=float,
+    )  # fmt: skip
+    return RuleSettings(
+        params,
+        np.ascontiguousarray(space.level_table, dtype=np.int64),
+        np.ascontiguousarray(space.table_n, dtype=float),
+        np.asarray(space.n_per_axis, dtype=np.int64),
+        np.ascontiguousarray(space.limits.hi, dtype=float),
+    )
+
+
+def _states(states: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.atleast_2d(states), dtype=float).reshape(-1, 7)
 
 
 def max_descent_speed_mps(
@@ -50,9 +93,12 @@ def max_descent_speed_mps(
 ) -> np.ndarray:
     """Fastest descent speed (m/s, >= 0) from which the margin thrust still brakes to the land
     speed by the pad; the land speed itself where the lander cannot brake at all."""
-    a_net = p.thrust_margin * max_vertical_thrust_n / np.asarray(mass_kg, dtype=float) - _G_MPS2
-    z = np.maximum(np.asarray(altitude_m, dtype=float), 0.0)
-    return np.sqrt(p.land_speed_mps**2 + 2.0 * np.maximum(a_net, 0.0) * z)
+    args = (np.asarray(v, dtype=float) for v in (altitude_m, mass_kg, max_vertical_thrust_n))
+    z, m, t = np.broadcast_arrays(*args)
+    rp = rule_settings(p, _ANY_SPACE).params
+    flat = (np.ascontiguousarray(v).reshape(-1) for v in (z, m, t))
+    out = kernels.max_descent_speeds(*flat, rp)
+    return out.reshape(z.shape)
 
 
 def brake_mask(
@@ -63,16 +109,14 @@ def brake_mask(
 ) -> np.ndarray:
     """(B,) True where the states (B, 7), after one step of the commanded vertical thrust (B,)
     at the margin, would descend beyond the braking limit (looking one step ahead: braking at
-    the margin thrust once the limit is crossed merely keeps the excess speed)."""
-    s = np.atleast_2d(states)
-    a_z = p.thrust_margin * np.asarray(vertical_thrust_n, dtype=float) / s[:, 6] - _G_MPS2
-    vz = s[:, 5] + a_z * DT_S
-    z = s[:, 2] + (s[:, 5] + 0.5 * a_z * DT_S) * DT_S
-    over = -vz > max_descent_speed_mps(z, s[:, 6], max_vertical_thrust_n, p)
-    if p.touchdown_speed_mps <= 0.0:
-        return over
-    touchdown_sq = s[:, 5] ** 2 - 2.0 * a_z * np.maximum(s[:, 2], 0.0)
-    return np.where(z <= 0.0, touchdown_sq > p.touchdown_speed_mps**2, over)
+    the margin thrust once the limit is crossed merely keeps the excess speed); a step that ends
+    on the ground is judged by its touchdown speed (where `p.touchdown_speed_mps` > 0)."""
+    s = _states(states)
+    thrust = np.broadcast_to(np.asarray(vertical_thrust_n, dtype=float), len(s))
+    top = np.broadcast_to(np.asarray(max_vertical_thrust_n, dtype=float), len(s))
+    rp = rule_settings(p, _ANY_SPACE).params
+    return np.array([kernels.brake_row(s[b], thrust[b], top[b], rp) for b in range(len(s))],
+                    dtype=bool)  # fmt: skip
 
 
 def guard_mask(
@@ -82,11 +126,12 @@ def guard_mask(
     vertical level (B,) is the lowest (free fall); where the raised level (`raised_thrust_n`, N)
     would climb faster than `p.guard_climb_mps2`, only a descent faster than the land speed
     counts."""
-    s = np.atleast_2d(states)
-    climbs = raised_thrust_n / s[:, 6] - _G_MPS2 > p.guard_climb_mps2
-    slowest = np.where(climbs, p.land_speed_mps, 0.0)
-    return (
-        (s[:, 2] < p.guard_altitude_m) & (s[:, 5] < -slowest) & (np.asarray(vertical_levels) == 0)
+    s = _states(states)
+    levels = np.broadcast_to(np.asarray(vertical_levels, dtype=np.int64), len(s))
+    rp = rule_settings(p, _ANY_SPACE).params
+    return np.array(
+        [kernels.guard_row(s[b], levels[b], float(raised_thrust_n), rp) for b in range(len(s))],
+        dtype=bool,
     )
 
 
@@ -96,23 +141,38 @@ def handover_mask(
     """(B,) True where the states (B, 7) are above the handover altitude and the fallback's
     lateral limit binds (`lateral_brake_accel_mps2` below its braking deceleration at full
     thrust `max_thrust_n` (3,), N), or lighter than the handover mass."""
-    s = np.atleast_2d(states)
-    light = s[:, 6] < p.handover_mass_kg
-    if p.handover_altitude_m <= 0.0:
-        return light
-    params = fallback.params
-    a_brake = braking_accel_mps2(s[:, 6], params, float(max_thrust_n[2]))
-    binds = lateral_brake_accel_mps2(s, params, max_thrust_n) < a_brake
-    return ((s[:, 2] > p.handover_altitude_m) & binds) | light
+    rp = rule_settings(p, _ANY_SPACE, fallback.params).params
+    return kernels.handover_rows(_states(states), np.asarray(max_thrust_n, dtype=float), rp)
 
 
-def delivered_fraction(scale: np.ndarray | None, n: int, p: RulesConfig) -> np.ndarray:
-    """(n,) fraction of the commanded vertical thrust the braking limit counts on: the measured
-    `scale` (n,) where below 1 and `p.measured_thrust`, floored at `p.min_measured_thrust`;
-    else 1 (a measured surplus is never counted on)."""
-    if scale is None or not p.measured_thrust:
-        return np.ones(n)
-    return np.clip(np.asarray(scale, dtype=float), p.min_measured_thrust, 1.0)
+def decide(
+    settings: RuleSettings,
+    proposed: np.ndarray,
+    states: np.ndarray,
+    fallback: ZemZevController,
+    vertical_thrust_scale: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`apply_rules` with its settings built (`rule_settings`), and the delivered fraction of
+    the commanded vertical thrust the braking limit counted on (n,): the measured
+    `vertical_thrust_scale` (n,) where below 1 and `measured_thrust`, floored at
+    `min_measured_thrust`; else 1 (a measured surplus is never counted on)."""
+    a = np.array(proposed, dtype=np.int64).reshape(-1)
+    s = _states(states)
+    rp = settings.params
+    n = len(a)
+    hand = kernels.handover_rows(s, settings.hi, rp) if rp[0] > 0.0 else np.zeros(n, dtype=bool)
+    if hand.any():
+        a[hand] = fallback.act_batch(s[hand])
+    source = np.empty(n, dtype=np.uint8)
+    frac = np.empty(n)
+    has_scale = vertical_thrust_scale is not None
+    scale = np.ascontiguousarray(vertical_thrust_scale, dtype=float) if has_scale else frac
+    kernels.rules_rows(
+        a, np.asarray(proposed, dtype=np.int64).reshape(-1), hand, s, scale, has_scale,
+        settings.level_table, settings.table_n, settings.n_per_axis, settings.hi, rp, source,
+        frac,
+    )  # fmt: skip
+    return a, source, frac
 
 
 def apply_rules(
@@ -124,32 +184,13 @@ def apply_rules(
     vertical_thrust_scale: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(actions flown (B,), source (B,) uint8) for the actions (B,) proposed in states (B, 7):
-    the fallback's action where `handover_mask`; then full vertical thrust where `brake_mask`,
-    else one vertical level up where `guard_mask`. The source is NETWORK where the action flown
-    is the proposed one, else the last rule that changed it."""
-    a = np.asarray(proposed, dtype=np.int64).reshape(-1)
-    source = np.full(len(a), NETWORK, dtype=np.uint8)
-    if not p.enabled:
-        return a, source
-    s = np.reshape(states, (-1, 7))
-    hand = handover_mask(s, space.limits.hi, p, fallback)
-    if hand.any():
-        a = a.copy()
-        a[hand] = fallback.act_batch(s[hand])
-        source[hand & (a != proposed)] = HANDOVER
-    levels = space.level_table[a]
-    frac = delivered_fraction(vertical_thrust_scale, len(a), p)
-    fire = brake_mask(s, frac * space.table_n[a, 2], frac * float(space.limits.hi[2]), p)
-    raised = float(space.levels_to_thrust(np.array([0, 0, 1]))[2])
-    guard = guard_mask(s, levels[:, 2], p, raised) & ~fire
-    if not (fire.any() or guard.any()):
-        return a, source
-    top = space.n_per_axis[2] - 1
-    source[fire & (levels[:, 2] != top)] = BRAKE
-    source[guard] = GUARD
-    levels = levels.copy()
-    levels[fire, 2] = top
-    levels[guard, 2] = 1
-    out = space.levels_to_action(levels).astype(np.int64)
-    source[out == proposed] = NETWORK
-    return out, source
+    the fallback's action where `handover_mask`; then full vertical thrust where `brake_mask`
+    (counting on the delivered fraction of the vertical thrust `decide` says), else one
+    vertical level up where `guard_mask`. The source is NETWORK where the action flown is the
+    proposed one, else the last rule that changed it."""
+    settings = rule_settings(p, space, fallback.params)
+    return decide(settings, proposed, states, fallback, vertical_thrust_scale)[:2]
+
+
+_ANY_SPACE = ActionSpace()
+"""the masks' settings do not depend on the action space"""
