@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 from nav_msgs.msg import Odometry, Path
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.task import Future
@@ -280,8 +281,15 @@ class SimNode(Node):
             qos.LOOP_SUB_QOS,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
         )
+        # Resets in a group of their own and the refusal delay's timer in another: a reset
+        # waiting out REFUSE_DELAY_S (a coroutine) must not hold the group of the commands.
+        self._sleep_group = ReentrantCallbackGroup()
         self.create_service(
-            ResetEpisode, names.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS
+            ResetEpisode,
+            names.RESET_SERVICE,
+            self._on_reset,
+            qos_profile=qos.SERVICE_QOS,
+            callback_group=MutuallyExclusiveCallbackGroup(),
         )
         self._odom_pub = self.create_publisher(Odometry, names.ODOM_TOPIC, qos.LOOP_PUB_QOS)
         self._path_pub = self.create_publisher(Path, names.PATH_TOPIC, qos.PATH_QOS)
@@ -586,7 +594,7 @@ class SimNode(Node):
             if not done.done():
                 done.set_result(None)
 
-        timer = self.create_timer(seconds, fire)
+        timer = self.create_timer(seconds, fire, callback_group=self._sleep_group)
         try:
             await done
         finally:
