@@ -56,12 +56,20 @@ def implementation(rt: Runtime, load_s: float) -> str:
     try:
         import numba  # noqa: PLC0415  (imported by the layer already)
 
-        from pd_core.runtime import kernels  # noqa: PLC0415
+        from pd_core.runtime import (  # noqa: PLC0415
+            kernels,
+            kernels_latency,
+            kernels_nav,
+            kernels_rules,
+        )
     except ImportError:  # a tree from before the kernels
         layer = "runtime layer numpy"
     else:
         compiled = sorted(
-            name for name, f in vars(kernels).items() if getattr(f, "signatures", None)
+            name
+            for module in (kernels, kernels_latency, kernels_nav, kernels_rules)
+            for name, f in vars(module).items()
+            if getattr(f, "signatures", None)
         )
         layer = f"runtime layer numba {numba.__version__} kernels ({', '.join(compiled)})"
     return (

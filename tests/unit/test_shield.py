@@ -428,3 +428,25 @@ def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
         with pytest.raises(ValueError, match=says) as err:
             load_actor(spec)
         assert "\n" not in str(err.value)
+
+
+def test_the_compiled_handover_is_the_fallbacks_own_lateral_limit():
+    """The handover kernel repeats ZEM/ZEV's braking and lateral-limit arithmetic for one
+    lander: on random states it must decide exactly as `pd_core.teachers.zemzev` computes."""
+    from pd_core.teachers.zemzev import braking_accel_mps2, lateral_brake_accel_mps2
+
+    rng = np.random.default_rng(11)
+    n = 4000
+    s = np.zeros((n, 7))
+    s[:, 0:2] = rng.uniform(-2500, 2500, (n, 2))
+    s[:, 2] = rng.uniform(0, 3000, n)
+    s[:, 3:5] = rng.uniform(-60, 60, (n, 2))
+    s[:, 5] = rng.uniform(-120, 5, n)
+    s[:, 6] = rng.uniform(1400, 2600, n)
+    p = dataclasses.replace(P, handover_mass_kg=0.0)
+    a_brake = braking_accel_mps2(s[:, 6], VERNIER_PARAMS, float(RL_THRUST.max_n[2]))
+    binds = lateral_brake_accel_mps2(s, VERNIER_PARAMS, RL_THRUST.max_n) < a_brake
+    want = (s[:, 2] > p.handover_altitude_m) & binds
+    got = handover_mask(s, RL_THRUST.max_n, p, FALLBACK)
+    assert 0.05 < want.mean() < 0.95  # both branches drawn
+    np.testing.assert_array_equal(got, want)

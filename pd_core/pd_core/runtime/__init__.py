@@ -1,7 +1,7 @@
 """What flies: a network (or controller) behind the runtime layer (`layer.Runtime`), its typed
 config (`config.RuntimeConfig`, pinned whole in the policy file), the per-step record
-(`decision.Decision`) and the policy files (`policy_file`). Imports numpy only; torch only reads a
-weights file in `load_policy`."""
+(`decision.Decision`) and the policy files (`policy_file`). Imports numpy and numba (the
+compiled per-lander arithmetic, `kernels*.py`); torch only reads a weights file in `load_policy`."""
 
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision

@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig
-from pd_core.runtime.kernels import (
-    consts,
+from pd_core.runtime.kernels import consts
+from pd_core.runtime.kernels_latency import (
     lag_residuals_rows,
     predict_rows,
     record_rows,
@@ -52,7 +52,7 @@ def lag_residuals(
     """(B, L) squared norm of the observed velocity change (B, 3) over the last step minus the one
     each lag would give: lag d applies `issued_n[:, d]` (B, L, 3), the command issued d + 1
     steps before now, through the thrust matrix `gain[:, d]` (B, L, 3, 3; None: identity), on
-    landers of mass (B,) kg (`pd_core.runtime.kernels.lag_residual`)."""
+    landers of mass (B,) kg (`pd_core.runtime.kernels_latency.lag_residual`)."""
     issued = np.ascontiguousarray(issued_n, dtype=float)
     g = _IDENTITY if gain is None else np.ascontiguousarray(gain, dtype=float)
     return lag_residuals_rows(
@@ -77,7 +77,8 @@ def window_gain_bound(
     forgetting sums: sxx of the commanded velocity change squared, sxy of it times the observed
     one, syy of the squared residuals, n of the windows ((m/s)^2, (m/s)^2, (m/s)^2, count);
     infinite where there is less evidence than `cfg.window_min_evidence`. The noise variance of
-    a window is (syy + 2 window_noise^2) / (n + 2) (`pd_core.runtime.kernels.window_bound`)."""
+    a window is (syy + 2 window_noise^2) / (n + 2)
+    (`pd_core.runtime.kernels_latency.window_bound`)."""
     sums = [np.ascontiguousarray(v, dtype=float).reshape(-1) for v in (sxx, sxy, syy, n)]
     return window_bounds(*sums, float(n_sd), *_window_settings(cfg))
 

@@ -21,7 +21,8 @@ import numpy as np
 
 from pd_core.config import DT_S
 from pd_core.runtime.config import NavFilterConfig
-from pd_core.runtime.kernels import consts, nav_estimate_rows
+from pd_core.runtime.kernels import consts
+from pd_core.runtime.kernels_nav import nav_estimate_rows
 from pd_core.runtime.rowmemory import RowMemory
 
 
@@ -71,7 +72,7 @@ class NavFilter(RowMemory):
         return self._steps[np.asarray(rows, dtype=np.int64)]
 
     def state(self) -> tuple[np.ndarray, ...]:
-        """The memory and settings `pd_core.runtime.kernels._nav_row` takes, in its order."""
+        """The memory and settings `pd_core.runtime.kernels_nav._nav_row` takes, in its order."""
         return (
             self._x, self._cov, self._z1, self._z2, self._a1, self._d2_sq, self._steps,
             self.noise_var, self.engaged, self._params, self._f, self._b, self._q, self._p0,

@@ -35,7 +35,7 @@ import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, GRAVITY_MPS2
-from pd_core.runtime import kernels
+from pd_core.runtime import kernels_rules as kernels
 from pd_core.runtime.config import RulesConfig
 from pd_core.teachers.zemzev import ZemZevController, ZemZevParams
 
