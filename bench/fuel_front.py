@@ -34,7 +34,8 @@ from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.dispersions import load_scenarios  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
-from pd_core.runtime.rules import ShieldedActor, ShieldParams  # noqa: E402
+from pd_core.runtime.config import RulesConfig, RuntimeConfig  # noqa: E402
+from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -59,13 +60,14 @@ FIXED = {  # name: (teacher changes, shield changes)
 }
 
 
-def actor(teacher: dict, shield: dict) -> ShieldedActor:
-    return ShieldedActor(
-        ZemZevController(replace(VERNIER_PARAMS, **teacher)), ShieldParams(**shield)
+def actor(teacher: dict, shield: dict) -> Runtime:
+    return Runtime(
+        ZemZevController(replace(VERNIER_PARAMS, **teacher)),
+        RuntimeConfig(rules=RulesConfig(**shield)),
     )
 
 
-VARIANTS: dict[str, Callable[[], ShieldedActor]] = {
+VARIANTS: dict[str, Callable[[], Runtime]] = {
     **{name: partial(actor, *changes) for name, changes in FIXED.items()},
 }
 
