@@ -74,6 +74,7 @@ KNOWN_QOS = {  # fallback when no publisher is seen
     names.CLOCK_TOPIC: qos.CLOCK_QOS,
 }
 STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most this long
+TAKE_S = 0.25  # ... after taking, for this long, what DDS had delivered already
 
 
 class Recorder(Node):
@@ -343,6 +344,11 @@ def main(argv: list[str] | None = None) -> int:
         t_end = time.monotonic() + args.duration if args.duration > 0 else float("inf")
         while not stop.is_set() and time.monotonic() < t_end and writer.is_alive():
             executor.spin_once(timeout_sec=0.05)
+        # What DDS delivered before the stop is still in the readers' queues (a flight's last
+        # messages, e.g. the episode result, come right before a stop): take it too.
+        t_take = time.monotonic() + TAKE_S
+        while time.monotonic() < t_take and writer.is_alive():
+            executor.spin_once(timeout_sec=0.02)
     finally:
         if node is not None:
             node.freeze_qos()  # the last graph query: the writer never touches the node again
