@@ -12,11 +12,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import highspy
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from pd_core.config import GRAVITY_MPS2
 from pd_core.ocp.model import (
     EXHAUST_VELOCITY_MPS,
     KN,
@@ -107,6 +109,73 @@ def _floor_rows(pb: Problem, g: Grid, p: np.ndarray, every: int) -> tuple[np.nda
     return rows, lower
 
 
+@dataclass(frozen=True)
+class BrakeEnvelope:
+    """A braking envelope on the plan (the receding-horizon teacher's; ours): at the end of
+    every `every`-th step (and the last 10), descent speed <= v_max(z, m) - margin_mps with
+
+        v_max(z, m) = sqrt(land_speed^2 + 2 (z + gate_m) (thrust_margin T_max / m - g)),
+
+    the runtime layer's braking limit (`pd_core.runtime.rules.max_descent_speed_mps`; z is the
+    altitude above the plan's target, gate_m below the pad's altitude). A plan inside it keeps
+    the vertical reserve the layer counts on at the mass it has *now*, not at the lighter mass
+    it will have when it brakes. Linearised at the current plan (mass frozen), as the floor."""
+
+    thrust_margin: float
+    max_vertical_thrust_n: float
+    land_speed_mps: float
+    margin_mps: float = 0.7
+    gate_m: float = 0.0
+    every: int = 2
+    elastic_kg_per_mps: float = 20.0  # cost of a row's violation in the LP (see fuel_lp_plan)
+
+
+def envelope_excess(pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope) -> float:
+    """Worst step's descent speed beyond v_max - margin of `env` (m/s; <= 0: inside)."""
+    fl = pb.fly(p, g)
+    gz = float(GRAVITY_MPS2[2])
+    vz = pb.v0[2] + np.cumsum(gz * g.dt + fl.k * fl.u[:, 2])
+    zt = np.maximum(pb.altitudes(fl, g) + env.gate_m, 0.0)
+    m_end = pb.m0 - np.cumsum(np.abs(fl.u).sum(axis=1) * g.dt / EXHAUST_VELOCITY_MPS)
+    a_l = np.maximum(env.thrust_margin * env.max_vertical_thrust_n / m_end + gz, 0.0)
+    vmax = np.sqrt(env.land_speed_mps**2 + 2.0 * a_l * zt)
+    return float((-vz - vmax + np.minimum(env.margin_mps, 0.5 * vmax)).max())
+
+
+def _envelope_rows(
+    pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rows (m, 6N) per kN, lower bounds (m,)) of v_z + v_max(z, m) >= margin (`BrakeEnvelope`)
+    linearised at p: v_z and z are linear in the vertical thrust with the mass frozen
+    (dv_i/du_j = k_j, dz_i/du_j = h_j + k_j (t_i - t_j) for j <= i), v_max in z."""
+    fl = pb.fly(p, g)
+    n_steps, n = len(g.dt), pb.n_control
+    sel = np.union1d(
+        np.arange(env.every - 1, n_steps, env.every), np.arange(max(n_steps - 10, 0), n_steps)
+    )
+    t_end = np.cumsum(g.dt)
+    gz = float(GRAVITY_MPS2[2])
+    vz = pb.v0[2] + np.cumsum(gz * g.dt + fl.k * fl.u[:, 2])
+    z = pb.altitudes(fl, g)
+    m_end = pb.m0 - np.cumsum(np.abs(fl.u).sum(axis=1) * g.dt / EXHAUST_VELOCITY_MPS)
+    a_l = np.maximum(env.thrust_margin * env.max_vertical_thrust_n / m_end + gz, 0.0)
+    zt = np.maximum(z + env.gate_m, 0.0)
+    vmax = np.sqrt(env.land_speed_mps**2 + 2.0 * a_l * zt)
+    dvmax = np.where(zt > 0.0, a_l / vmax, 0.0)
+    sel_t = t_end[sel, None]
+    before = np.arange(n_steps)[None, :] <= sel[:, None]
+    coef = fl.k[None, :] + dvmax[sel, None] * (fl.h[None, :] + fl.k[None, :] * (sel_t - t_end))
+    coef *= before
+    c_ctrl = g.wt_mul(coef.T).T * KN  # (m, n_control) per kN of vertical control point
+    rows = np.zeros((len(sel), 6 * n))
+    rows[:, 4 * n : 5 * n] = c_ctrl
+    rows[:, 5 * n :] = -c_ctrl
+    now = vz[sel] + dvmax[sel] * z[sel]
+    margin = np.minimum(env.margin_mps, 0.5 * vmax[sel])  # at rest the limit is land_speed
+    lower = margin - vmax[sel] + dvmax[sel] * z[sel] - now + c_ctrl @ (p[:, 2] / KN)
+    return rows, lower
+
+
 def fuel_lp_plan(
     pb: Problem,
     g: Grid,
@@ -114,10 +183,12 @@ def fuel_lp_plan(
     passes: int,
     highs: highspy.Highs | None = None,
     floor_every: int = 0,
+    envelope: BrakeEnvelope | None = None,
 ) -> np.ndarray | None:
     """Control points (N, 3) N after up to `passes` LP passes from p at the fixed t_f of grid g,
     min sum_k w_k (p+ + p-) subject to the linearised terminal constraints (and, with
-    `floor_every`, altitude >= 0 at every floor_every-th step); None if an LP is infeasible.
+    `floor_every`, altitude >= 0 at every floor_every-th step; with `envelope`, the braking
+    envelope, elastic); None if an LP is infeasible.
     The receding-horizon teacher calls this with passes=1 and its own `highs`."""
     n = pb.n_control
     c = np.tile(fuel_weights(g), 6)  # [p+ axis 0, p- axis 0, p+ axis 1, ...]
@@ -133,16 +204,77 @@ def fuel_lp_plan(
             a_eq = np.concatenate([a_eq, rows])
             row_hi = np.concatenate([rhs, np.full(len(lower), np.inf)])
             rhs = np.concatenate([rhs, lower])
-        x = solve_lp(c, a_eq, rhs, lb, ub, highs, row_hi)
+        cc, lbx, ubx = c, lb, ub
+        if envelope is not None:
+            # elastic: a slack per row at `elastic_kg_per_mps`, so that a plan outside the
+            # envelope (the free-t_f optimum, a state the disturbance pushed out) moves in
+            rows, lower = _envelope_rows(pb, g, p, envelope)
+            k = len(lower)
+            if row_hi is None:
+                row_hi = rhs.copy()
+            a_eq = np.concatenate([a_eq, rows])
+            a_eq = np.concatenate([a_eq, np.zeros((len(a_eq), k))], axis=1)
+            a_eq[-k:, -k:] = np.eye(k)
+            row_hi = np.concatenate([row_hi, np.full(k, np.inf)])
+            rhs = np.concatenate([rhs, lower])
+            cc = np.concatenate([c, np.full(k, envelope.elastic_kg_per_mps)])
+            lbx = np.concatenate([lbx, np.zeros(k)])
+            ubx = np.concatenate([ubx, np.full(k, np.inf)])
+        x = solve_lp(cc, a_eq, rhs, lbx, ubx, highs, row_hi)
         if x is None:
             return None
-        xs = x.reshape(3, 2, n)
+        xs = x[: 6 * n].reshape(3, 2, n)
         p_new = (xs[:, 0] - xs[:, 1]).T * KN
         change = np.abs(p_new - p).max()
         p = p_new
         if change < 1e-1:
             break
     return p
+
+
+def envelope_fuel_plan(
+    pb: Problem,
+    p: np.ndarray,
+    t_f: float,
+    envelope: BrakeEnvelope,
+    highs: highspy.Highs | None = None,
+    floor_every: int = 0,
+    step_s: float = 0.5,
+    max_extra_s: float = 15.0,
+    passes: int = 8,
+) -> tuple[np.ndarray, float] | None:
+    """(control points, t_f) of the cheapest plan inside `envelope` found by LP passes
+    (`fuel_lp_plan`) at t_f, t_f + step_s, ... (each warm-started from the last feasible plan,
+    a homotopy in t_f), stopping two steps after the fuel stops falling; None if none up to
+    t_f + max_extra_s. The free-t_f fuel optimum at the same limits is the natural start (a plan
+    inside the envelope brakes earlier, so it needs more time, never less). A local optimum:
+    an upper bound on the envelope's fuel floor."""
+    best: tuple[np.ndarray, float] | None = None
+    best_fuel, worse = math.inf, 0
+    start = p
+    for k in range(int(max_extra_s / step_s) + 1):
+        t = t_f + k * step_s
+        g = pb.grid(t)
+        q = fuel_lp_plan(pb, g, start, passes, highs, floor_every, envelope)
+        if q is None:
+            if best is not None:
+                worse += 1
+            if worse >= 2:
+                break
+            continue
+        fl = pb.fly(q, g)
+        start = q
+        if np.abs(fl.xf).max() > 0.5 or np.abs(fl.vf).max() > 0.1:
+            continue  # the LP passes did not converge onto the target
+        if envelope_excess(pb, g, q, envelope) > 0.05:
+            continue  # not inside yet: the next t_f starts from here
+        if fl.fuel < best_fuel:
+            best, best_fuel, worse = (q, t), fl.fuel, 0
+        else:
+            worse += 1
+            if worse >= 2:
+                break
+    return best
 
 
 def fuel_lp_at(t_f: float, pb: Problem, st: WarmStart, passes: int) -> TfEval:

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_banded
+from scipy.linalg.lapack import dptsv
 
 from pd_core.ocp.guess import initial_guess
 from pd_core.ocp.model import KN, TF_MAX_S, TF_MIN_S, Grid, Problem, SolverOutput, SolveTimeout
@@ -76,12 +76,11 @@ def _kkt_solve(
     x = np.empty((3, n, 7))
     for ax in range(3):
         f = free[ax]
-        ab = np.zeros((3, n))
-        off = q_upper * f[:-1] * f[1:]
-        ab[0, 1:] = off
-        ab[1] = q_main * f + (1.0 - f)
-        ab[2, :-1] = off
-        x[ax] = solve_banded((1, 1), ab, r[ax], check_finite=False)
+        # symmetric positive definite tridiagonal (Q on the free points, identity on the fixed
+        # ones): LAPACK dptsv, 5x cheaper than scipy's solve_banded (bench/mpc_speed.py)
+        _, _, x[ax], info = dptsv(q_main * f + (1.0 - f), q_upper * f[:-1] * f[1:], r[ax])
+        if info != 0:
+            raise np.linalg.LinAlgError(f"dptsv: info {info}")
     s = 0.5 * np.einsum("oan,anp->op", jac, x[..., 1:])
     lam = np.linalg.solve(s, np.einsum("oan,an->o", jac, p_b - x[..., 0]) - rhs)
     return p_b - x[..., 0] - 0.5 * np.einsum("anp,p->an", x[..., 1:], lam), lam

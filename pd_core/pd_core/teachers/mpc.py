@@ -55,7 +55,14 @@ import numpy as np
 
 from pd_core import ocp
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
-from pd_core.config import DT_S, ThrustLimits
+from pd_core.config import (
+    BRAKE_MARGIN,
+    DT_S,
+    GRAVITY_MPS2,
+    LAND_SPEED_MPS,
+    TOUCHDOWN_SPEED_MPS,
+    ThrustLimits,
+)
 from pd_core.discretise import eq5_levels
 from pd_core.dynamics import step_scalar
 from pd_core.ocp.fuel import fuel_lp_plan, new_highs
@@ -81,6 +88,13 @@ class MPCParams:
     # plans use this fraction of the RL thrust limits: the rest is authority to correct the
     # quantisation and the disturbance (a fuel-optimal plan brakes at its limit to the end)
     plan_thrust_fraction: float = 0.9
+    # the vertical axis's fraction where it differs (None: plan_thrust_fraction): the reserve
+    # the runtime layer's braking limit counts on is a vertical one (RulesConfig.thrust_margin)
+    vertical_thrust_fraction: float | None = None
+    # quantise within the runtime layer's braking limit (`pd_core.runtime.rules.brake_mask` at
+    # the default RulesConfig, full thrust delivered): a vertical level the limit would raise
+    # is raised here, so the layer and the teacher agree (see `brake_limited`)
+    keep_brake_limit: bool = False
     # plans end at rest this high above the pad (a "low gate"): rest exactly on the pad at t_f
     # asks for infinite precision at t_f -> 0, and a plan that brakes at its limit to the
     # ground leaves nothing for the quantisation and the disturbance
@@ -154,9 +168,11 @@ class MPCController:
         # the problem built once; `at` re-uses it from each state (checks included)
         origin = np.array([0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0])
         f = self.params.plan_thrust_fraction
+        fz = self.params.vertical_thrust_fraction
+        scale = np.array([f, f, f if fz is None else fz])
         limits = ThrustLimits(
-            tuple(f * actions.limits.lo),
-            tuple(f * actions.limits.hi),  # type: ignore[arg-type]
+            tuple(scale * actions.limits.lo),  # type: ignore[arg-type]
+            tuple(scale * actions.limits.hi),  # type: ignore[arg-type]
         )
         self._problem = ocp.Problem(
             origin[0:3], origin[3:6], origin[6], self.params.objective, 2, limits
@@ -226,8 +242,22 @@ class MPCController:
             action = int(self.fallback.act_batch(s.reshape(1, 7))[0])
         else:
             action = self._eq5_action(row, s, planned)
+        if self.params.keep_brake_limit:
+            action = self._within_brake_limit(s, action)
         row.predicted = np.array(step_scalar(tuple(s), tuple(self.thrust(action)), _ZERO, DT_S))
         return action
+
+    def _within_brake_limit(self, s: np.ndarray, action: int) -> int:
+        """The action with its vertical level raised to the lowest one the runtime layer's
+        braking limit lets pass from s (the top level if none does)."""
+        levels = self.actions.level_table[action].copy()
+        top = self.actions.n_per_axis[2] - 1
+        while levels[2] < top:
+            t_z = float(self.actions.levels_to_thrust(levels)[2])
+            if not brake_limited(s, t_z, float(self._hi[2])):
+                break
+            levels[2] += 1
+        return int(self.actions.levels_to_action(levels[None])[0])
 
     def _to_gate(self, s: np.ndarray) -> np.ndarray:
         """The state relative to the gate the plans aim at (rest, gate_altitude_m up)."""
@@ -369,6 +399,29 @@ class MPCController:
         return int(self.actions.levels_to_action(levels[None])[0])
 
 
+def brake_limited(
+    s: np.ndarray,
+    vertical_thrust_n: float,
+    max_vertical_thrust_n: float,
+    margin: float = BRAKE_MARGIN,
+    land_speed_mps: float = LAND_SPEED_MPS,
+    touchdown_speed_mps: float = TOUCHDOWN_SPEED_MPS,
+) -> bool:
+    """True where the runtime layer's braking limit would fire on a vertical command (N) from
+    state s (7,): the formula of `pd_core.runtime.rules.brake_mask` (one step of the command
+    counted at `margin`, against v_max(z, m) = sqrt(v_land^2 + 2 z (margin T_max / m - g)), a
+    step ending on the ground judged by its touchdown speed), repeated here so that the teacher
+    does not import the runtime package (tests/unit/test_mpc.py checks they agree)."""
+    g = -float(GRAVITY_MPS2[2])
+    a_z = margin * vertical_thrust_n / s[6] - g
+    vz = s[5] + a_z * DT_S
+    z = s[2] + (s[5] + 0.5 * a_z * DT_S) * DT_S
+    a_max = max(margin * max_vertical_thrust_n / s[6] - g, 0.0)
+    if touchdown_speed_mps > 0.0 and z <= 0.0:
+        return bool(s[5] ** 2 - 2.0 * a_z * max(s[2], 0.0) > touchdown_speed_mps**2)
+    return bool(-vz > math.sqrt(land_speed_mps**2 + 2.0 * a_max * max(z, 0.0)))
+
+
 def mpc_controller(objective: str, fallback: Actor) -> MPCController:
     """The teacher with the RL action set (Sec. 4.1) and the rounding measured best for its
     objective (8 nominal episodes, bench/mpc_speed.py): the energy plans are smooth, and the
@@ -379,3 +432,29 @@ def mpc_controller(objective: str, fallback: Actor) -> MPCController:
         raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
     rounding = "eq5" if objective == "energy" else "eq5-replan"
     return MPCController(MPCParams(objective=objective, rounding=rounding), fallback)
+
+
+RESERVE_PARAMS = MPCParams(
+    objective="fuel",
+    rounding="nearest",
+    keep_brake_limit=True,
+    gate_altitude_m=0.5,
+)
+
+
+def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> MPCController:
+    """`mpc-fuel-reserve` (issue 32): the fuel teacher flying its own plans within the runtime
+    layer's vertical reserve. Measured on nominal episodes behind the layer
+    (bench/mpc_diagnose.py, docs/experiments/2026-11-26-fuel-optimal-teacher.md):
+
+    * plans on 90 % of every axis's thrust (the vertical reserve the braking limit counts on);
+    * quantises to the nearest level ("eq5-replan" rounds every braking step up to full
+      thrust, 1.28x against 1.11x), then raises the vertical level where the layer's braking
+      limit would (`keep_brake_limit`): the layer and the teacher agree, and the layer changes
+      under 1 % of its steps (32 % for `mpc-fuel`);
+    * plans end at rest 0.5 m above the pad (2 m: the fallback's slow final descent costs
+      ~4 % of the fuel), and the t_f search stays (without it 1.22x, 80 % landed).
+    """
+    ctl = MPCController(params, fallback)
+    ctl.name = "mpc-fuel-reserve"
+    return ctl

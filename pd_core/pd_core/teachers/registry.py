@@ -2,14 +2,15 @@
 
 `mpc-fuel` and `mpc-energy` are the receding-horizon optimal-control teacher
 (`pd_core.teachers.mpc`) with the fuel or the energy (Eq. 4) objective, and ZEM/ZEV as its
-fallback near the pad.
+fallback near the pad. `mpc-fuel-reserve` is the fuel teacher that keeps the runtime layer's
+vertical reserve (`pd_core.teachers.mpc.reserve_controller`, issue 32).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from pd_core.teachers.mpc import MPCController, mpc_controller
+from pd_core.teachers.mpc import MPCController, mpc_controller, reserve_controller
 from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController
 
 
@@ -23,6 +24,7 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "zemzev-vernier": lambda: ZemZevController(VERNIER_PARAMS),
     "mpc-fuel": _mpc("fuel"),
     "mpc-energy": _mpc("energy"),
+    "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
 }
 CONTROLLERS = tuple(FACTORIES)
 
