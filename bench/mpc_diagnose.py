@@ -11,7 +11,7 @@ layer), one episode at a time, and prints per episode and as medians:
 * the first (cold) plan's predicted fuel to its gate / that optimum (what the plans cost);
 * the share of steps on the ZEM/ZEV fallback, and the fuel burnt on it;
 * the share of steps the layer changed (brake, guard, handover);
-* the flown fuel on the plan's steps against the plans' own prediction at the first plan.
+* the share of warm re-plans that needed the full RL limits (the plan margin had no plan).
 """
 
 from __future__ import annotations
@@ -104,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     if not a.quiet:
         print(head)
     rows = []
+    full, warm = 0, 0  # warm re-plans on the full limits (recovery), all warm re-plans
     for i in range(a.episodes):
         ctl = make_controller(a.controller)
         if a.set and isinstance(ctl, MPCController):
@@ -112,6 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         actor = rec or ctl
         wrap = None if a.bare else _Layer(Runtime(actor, RuntimeConfig()))
         ro = rollout(wrap or actor, 1, a.seed + i, keep_trajectories=1)
+        if rec:
+            full, warm = full + ctl.stats.full_limits, warm + len(ctl.stats.warm)
         s0 = ro.initial_states[0]
         opt = ocp.solve(s0[0:3], s0[3:6], s0[6], objective="fuel", limits=RL_THRUST).fuel
         path = ro.trajectories[0]
@@ -152,6 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         f"of steps ({np.median(m[:, 6]):.1f} kg median), layer changed "
         f"{changed:.2f} % of {int(tot)} steps "
         f"(brake {int(m[:, 8].sum())}, guard {int(m[:, 9].sum())}, handover {int(m[:, 10].sum())})"
+        f"; re-plans on the full limits {100 * full / max(warm, 1):.2f} % of {warm}"
     )
     return 0
 

@@ -10,8 +10,14 @@ solving thread) and the CPU time of the cold free-t_f solve of each episode's fi
 their ratio (CPU). On a machine other processes load, wall clock includes waiting for a core;
 CPU time does not.
 
-Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="highs") against
-highspy directly (no presolve), on the same LPs.
+Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="highs"), highspy
+with a `HighsLp` built in Python (the path before issue 32), and `pd_core.ocp.fuel.LPSolver`
+(arrays passed straight to HiGHS, one model re-used; cold, and warm from the last LP's basis),
+on the same LPs; and (`--banded`) the energy QP's tridiagonal solve, scipy `solve_banded`
+against LAPACK `dptsv`.
+
+A registered controller name with `-warmlp` appended flies it with `warm_lp=True` (each fuel LP
+starts from the last LP's optimal basis).
 
 Part 3 (`--demos N`): wall time of N teacher demonstration episodes
 (`pd_core.demonstrations.teacher_flown.controller_demonstrations`, mpc-fuel, every core, under
@@ -26,18 +32,22 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import replace
 from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import highspy  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.linalg import solve_banded  # noqa: E402
+from scipy.linalg.lapack import dptsv  # noqa: E402
 from scipy.optimize import linprog  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
-from pd_core.ocp.fuel import fuel_weights, new_highs, solve_lp  # noqa: E402
+from pd_core.ocp.fuel import LPSolver, fuel_weights, new_highs  # noqa: E402
 from pd_core.ocp.model import KN  # noqa: E402
 from pd_core.teachers.mpc import MPCController, MPCParams  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402
@@ -49,8 +59,12 @@ def _ms(v: list[float], q: float) -> float:
 
 
 def controller(name: str) -> Any:
-    """A registered controller, or `mpc-<objective>-nearest`: the teacher rounding to the
-    nearest level instead of Eq. 5 (not the paper's; for comparison)."""
+    """A registered controller, `NAME-warmlp` (NAME with `warm_lp=True`), or
+    `mpc-<objective>-nearest`: the teacher rounding to the nearest level instead of Eq. 5 (not
+    the paper's; for comparison)."""
+    if name.endswith("-warmlp"):
+        base = make_controller(name[: -len("-warmlp")])
+        return MPCController(replace(base.params, warm_lp=True), base.fallback)
     if name.endswith("-nearest"):
         objective = name.split("-")[1]
         return MPCController(MPCParams(objective=objective, rounding="nearest"), ZemZevController())
@@ -100,28 +114,75 @@ def fuel_optimal(
     return np.array(fuel), wall, cpu
 
 
-def lp_compare(n_control: int = 40, repeats: int = 30) -> tuple[float, float]:
-    """Median ms of one warm-re-plan fuel LP: scipy linprog vs highspy (no presolve)."""
+def _old_highs_lp(c, a_eq, rhs, lb, ub, h) -> None:  # noqa: ANN001
+    """The fuel LP through a `HighsLp` built in Python (solve_lp before issue 32)."""
+    rows, cols = a_eq.shape
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = cols, rows
+    lp.col_cost_, lp.col_lower_, lp.col_upper_ = c, lb, ub
+    lp.row_lower_, lp.row_upper_ = rhs, rhs
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = np.arange(0, rows * cols + 1, rows)
+    lp.a_matrix_.index_ = np.tile(np.arange(rows), cols)
+    lp.a_matrix_.value_ = a_eq.T.reshape(-1)
+    h.passModel(lp)
+    h.run()
+
+
+def lp_compare(n_control: int = 40, repeats: int = 30) -> dict[str, float]:
+    """Median CPU ms of one warm-re-plan fuel LP (a sequence of nearby LPs): scipy
+    linprog, highspy with a HighsLp, LPSolver cold and LPSolver warm (last LP's basis); the LPs
+    are one state's at t_f growing by 0.05 s (all feasible)."""
     s = np.array([800.0, -400.0, 1200.0, -30.0, 10.0, -60.0, 1900.0])
     r = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=RL_THRUST, n_control=n_control)
     pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", n_control, RL_THRUST)
-    g = pb.grid(r.time_of_flight)
-    jac, rhs, _ = pb.linearised(r.thrust, g)
-    c = np.tile(fuel_weights(g), 6)
-    a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n_control)
     hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
     ub = np.repeat(hi_pm.reshape(-1), n_control)
     lb = np.zeros_like(ub)
+    lps = []
+    for k in range(repeats):
+        g = pb.grid(r.time_of_flight + 0.05 * k)
+        jac, rhs, _ = pb.linearised(r.thrust, g)
+        c = np.tile(fuel_weights(g), 6)
+        a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n_control)
+        lps.append((c, a_eq, rhs))
     h = new_highs()
-    t_scipy, t_hs = [], []
-    for _ in range(repeats):
+    cold, warm = LPSolver(warm=False), LPSolver(warm=True)
+    times: dict[str, list[float]] = {"scipy": [], "highslp": [], "cold": [], "warm": []}
+    for c, a_eq, rhs in lps:
         t0 = time.thread_time()
         linprog(c, A_eq=a_eq, b_eq=rhs, bounds=np.stack([lb, ub], 1), method="highs")
-        t_scipy.append(time.thread_time() - t0)
+        times["scipy"].append(time.thread_time() - t0)
         t0 = time.thread_time()
-        solve_lp(c, a_eq, rhs, lb, ub, h)
-        t_hs.append(time.thread_time() - t0)
-    return _ms(t_scipy, 50), _ms(t_hs, 50)
+        _old_highs_lp(c, a_eq, rhs, lb, ub, h)
+        times["highslp"].append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        cold.solve(c, a_eq, rhs, rhs, lb, ub)
+        times["cold"].append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        warm.solve(c, a_eq, rhs, rhs, lb, ub)
+        times["warm"].append(time.thread_time() - t0)
+    return {k: _ms(v, 50) for k, v in times.items()}
+
+
+def banded_compare(n: int = 40, repeats: int = 2000) -> tuple[float, float]:
+    """Median CPU us of one tridiagonal SPD solve with 7 right-hand sides (the energy QP's):
+    scipy solve_banded against LAPACK dptsv."""
+    rng = np.random.default_rng(0)
+    d = 2.0 + rng.uniform(size=n)
+    e = rng.uniform(-0.5, 0.5, n - 1)
+    b = rng.normal(size=(n, 7))
+    ab = np.zeros((3, n))
+    ab[0, 1:], ab[1], ab[2, :-1] = e, d, e
+    t_b, t_d = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        solve_banded((1, 1), ab, b, check_finite=False)
+        t_b.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        dptsv(d, e, b)
+        t_d.append(time.perf_counter() - t0)
+    return 1e3 * _ms(t_b, 50), 1e3 * _ms(t_d, 50)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -132,13 +193,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--controllers",
         nargs="+",
-        default=["mpc-fuel", "mpc-energy", "zemzev"],
-        help="registered names, or mpc-fuel-nearest / mpc-energy-nearest",
+        default=["mpc-fuel-reserve", "mpc-fuel", "mpc-energy", "zemzev"],
+        help="registered names, NAME-warmlp, or mpc-fuel-nearest / mpc-energy-nearest",
     )
-    ap.add_argument("--lp", action="store_true", help="also compare scipy linprog and highspy")
+    ap.add_argument("--lp", action="store_true", help="also compare the LP solver paths")
+    ap.add_argument("--banded", action="store_true", help="also time solve_banded vs dptsv")
     ap.add_argument("--demos", type=int, default=0, metavar="N", help="time N demo episodes")
     ap.add_argument("--dispersions", default="standard", help="dispersions of the demo episodes")
     ap.add_argument("--only-demos", action="store_true", help="skip parts 1 and 2")
+    ap.add_argument("--only-micro", action="store_true", help="--lp / --banded only")
     args = ap.parse_args(argv)
     if args.demos > 0:
         t0 = time.perf_counter()
@@ -154,32 +217,40 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.only_demos:
             return 0
-    fuel_opt, opt_wall, opt_cpu = fuel_optimal(args.episodes, args.seed, args.fuel_subset)
-    print(
-        f"{args.episodes} nominal Table 3 episodes (disturbances on, seed {args.seed}); fuel "
-        f"ratio over the first {len(fuel_opt)}; cold free-t_f fuel-optimal solve (80 points) "
-        f"median {_ms(opt_wall, 50):.1f} ms wall, {_ms(opt_cpu, 50):.1f} ms CPU"
-    )
-    head = (
-        f"{'controller':<11}{'success':>8}{'fuel kg':>9}{'/opt':>7}{'warm ms med/p99':>17}"
-        f"{'cpu ms med/p99':>16}{'cold cpu':>9}{'cold/warm':>10}{'fallback%':>10}{'wall s':>8}"
-    )
-    print(head)
-    for name in args.controllers:
-        r = fly(name, args.episodes, args.seed, fuel_opt)
-        row = f"{name:<11}{100 * r['success']:>7.1f}%{r['fuel']:>9.1f}{r['ratio']:>7.3f}"
-        if "warm_med" in r:
-            row += (
-                f"{r['warm_med']:>9.2f}/{r['warm_p99']:<7.1f}"
-                f"{r['warm_cpu_med']:>8.2f}/{r['warm_cpu_p99']:<7.1f}{r['cold_cpu_med']:>9.1f}"
-                f"{r['cold_cpu_med'] / r['warm_cpu_med']:>9.0f}x{r['fallback_pct']:>10.1f}"
-            )
-        else:
-            row += f"{'-':>17}{'-':>16}{'-':>9}{'-':>10}{'-':>10}"  # a law, no solves
-        print(row + f"{r['wall_s']:>8.1f}", flush=True)
+    if not args.only_micro:
+        fuel_opt, opt_wall, opt_cpu = fuel_optimal(args.episodes, args.seed, args.fuel_subset)
+        print(
+            f"{args.episodes} nominal Table 3 episodes (disturbances on, seed {args.seed}); fuel "
+            f"ratio over the first {len(fuel_opt)}; cold free-t_f fuel-optimal solve (80 points) "
+            f"median {_ms(opt_wall, 50):.1f} ms wall, {_ms(opt_cpu, 50):.1f} ms CPU"
+        )
+        head = (
+            f"{'controller':<22}{'success':>8}{'fuel kg':>9}{'/opt':>7}{'warm ms med/p99':>17}"
+            f"{'cpu ms med/p99':>16}{'cold cpu':>9}{'cold/warm':>10}{'fallback%':>10}{'wall s':>8}"
+        )
+        print(head)
+        for name in args.controllers:
+            r = fly(name, args.episodes, args.seed, fuel_opt)
+            row = f"{name:<22}{100 * r['success']:>7.1f}%{r['fuel']:>9.1f}{r['ratio']:>7.3f}"
+            if "warm_med" in r:
+                row += (
+                    f"{r['warm_med']:>9.2f}/{r['warm_p99']:<7.1f}"
+                    f"{r['warm_cpu_med']:>8.2f}/{r['warm_cpu_p99']:<7.1f}{r['cold_cpu_med']:>9.1f}"
+                    f"{r['cold_cpu_med'] / r['warm_cpu_med']:>9.0f}x{r['fallback_pct']:>10.1f}"
+                )
+            else:
+                row += f"{'-':>17}{'-':>16}{'-':>9}{'-':>10}{'-':>10}"  # a law, no solves
+            print(row + f"{r['wall_s']:>8.1f}", flush=True)
     if args.lp:
-        sp, hs = lp_compare()
-        print(f"fuel LP of a re-plan (40 points, CPU ms): scipy linprog {sp:.2f}, highspy {hs:.2f}")
+        t = lp_compare()
+        print(
+            f"fuel LP of a re-plan (40 points, CPU ms median): scipy linprog {t['scipy']:.3f}, "
+            f"highspy + HighsLp {t['highslp']:.3f}, LPSolver {t['cold']:.3f}, LPSolver from "
+            f"the last basis {t['warm']:.3f}"
+        )
+    if args.banded:
+        sb, dp = banded_compare()
+        print(f"tridiagonal solve (40 x 7, us median): solve_banded {sb:.1f}, dptsv {dp:.1f}")
     return 0
 
 

@@ -65,7 +65,7 @@ from pd_core.config import (
 )
 from pd_core.discretise import eq5_levels
 from pd_core.dynamics import step_scalar
-from pd_core.ocp.fuel import fuel_lp_plan, new_highs
+from pd_core.ocp.fuel import LPSolver, fuel_lp_plan
 from pd_core.ocp.qp import WarmStart, energy_qp_plan
 from pd_core.state import check_state
 
@@ -85,6 +85,9 @@ class MPCParams:
     min_control_points: int = 4
     max_control_points: int = 40
     passes: int = 1  # SQP (energy) or LP (fuel) passes per warm re-plan
+    # fuel LPs start from the last LP's optimal basis: 18 -> 15 simplex iterations, no faster
+    # (bench/mpc_speed.py --lp), and a tied optimum may change vertex: off
+    warm_lp: bool = False
     # plans use this fraction of the RL thrust limits: the rest is authority to correct the
     # quantisation and the disturbance (a fuel-optimal plan brakes at its limit to the end)
     plan_thrust_fraction: float = 0.9
@@ -146,6 +149,7 @@ class ReplanStats:
     warm_cpu: list[float] = field(default_factory=list)
     cold_cpu: list[float] = field(default_factory=list)
     fallback_steps: int = 0
+    full_limits: int = 0  # warm re-plans that needed the full RL limits (`recovery`)
 
 
 class MPCController:
@@ -179,7 +183,9 @@ class MPCController:
         )
         self._problem_full = replace(self._problem, limits=actions.limits)
         self._rows: list[_Row] = []
-        self._highs = new_highs()  # re-used by every fuel LP of this controller
+        # one HiGHS model for every fuel LP of this controller, passed as arrays (`LPSolver`;
+        # with `warm_lp` each LP also starts from the last one's basis)
+        self._highs = LPSolver(warm=self.params.warm_lp)
         self.stats = ReplanStats()
 
     def reset(self) -> None:
@@ -289,6 +295,7 @@ class MPCController:
             for full, extra_s in p.recovery:
                 plan = self._warm(row, s, row.t_go - DT_S + extra_s, full)
                 if plan is not None:
+                    self.stats.full_limits += full
                     break
             self.stats.warm.append(time.perf_counter() - t0)
             self.stats.warm_cpu.append(time.thread_time() - c0)
