@@ -34,6 +34,13 @@ flies the plan's first step quantised to one of the 147 actions, and re-plans at
   time-to-go with the margin, then with the full limits, then with more time (`recovery`). So
   the teacher never fails for want of a plan, and never pays a cold solve mid-flight.
 
+* **Keeping the layer's reserve** (`mpc-fuel-reserve`, `reserve_controller`, issue 32): the
+  fuel plans round to the nearest level and `keep_brake_limit` raises the vertical level where
+  the runtime layer's braking limit would (`brake_limited`), so the layer rarely changes an
+  action. The fuel-optimal plan at 90 % of the thrust counts on the mass it will have lost when
+  it brakes and rides outside that limit; a plan inside it costs >= 1.04x the fuel optimum
+  (`bench/envelope_floor.py`).
+
 Plans are matched to states, not to row numbers: `pd_core.experiments.evaluate.rollout` passes
 only the
 landers still flying, so rows shift as episodes end. Each plan remembers the state it predicts
@@ -85,7 +92,7 @@ class MPCParams:
     min_control_points: int = 4
     max_control_points: int = 40
     passes: int = 1  # SQP (energy) or LP (fuel) passes per warm re-plan
-    # fuel LPs start from the last LP's optimal basis: 18 -> 15 simplex iterations, no faster
+    # fuel LPs start from the last LP's optimal basis: 17 -> 15 simplex iterations, no faster
     # (bench/mpc_speed.py --lp), and a tied optimum may change vertex: off
     warm_lp: bool = False
     # plans use this fraction of the RL thrust limits: the rest is authority to correct the
@@ -418,7 +425,7 @@ def brake_limited(
     state s (7,): the formula of `pd_core.runtime.rules.brake_mask` (one step of the command
     counted at `margin`, against v_max(z, m) = sqrt(v_land^2 + 2 z (margin T_max / m - g)), a
     step ending on the ground judged by its touchdown speed), repeated here so that the teacher
-    does not import the runtime package (tests/unit/test_mpc.py checks they agree)."""
+    does not import the runtime package (tests/unit/test_mpc_reserve.py checks they agree)."""
     g = -float(GRAVITY_MPS2[2])
     a_z = margin * vertical_thrust_n / s[6] - g
     vz = s[5] + a_z * DT_S
