@@ -28,7 +28,8 @@ import numpy as np  # noqa: E402
 from pd_core import ocp  # noqa: E402
 from pd_core.config import BRAKE_MARGIN, LAND_SPEED_MPS, RL_THRUST, ThrustLimits  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
-from pd_core.ocp.fuel import BrakeEnvelope, envelope_fuel_plan, new_highs  # noqa: E402
+from pd_core.ocp.fuel import BrakeEnvelope, envelope_fuel_plan  # noqa: E402
+from pd_core.ocp.lp import new_highs  # noqa: E402
 from pd_core.teachers.mpc import brake_limited  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402
 

@@ -11,7 +11,7 @@ their ratio (CPU). On a machine other processes load, wall clock includes waitin
 CPU time does not.
 
 Part 2 (`--lp`): the fuel LP of a warm re-plan through scipy's linprog(method="highs"), highspy
-with a `HighsLp` built in Python (the path before issue 32), and `pd_core.ocp.fuel.LPSolver`
+with a `HighsLp` built in Python (the path before issue 32), and `pd_core.ocp.lp.LPSolver`
 (arrays passed straight to HiGHS, one model re-used; cold, and warm from the last LP's basis),
 on the same LPs; and (`--banded`) the energy QP's tridiagonal solve, scipy `solve_banded`
 against LAPACK `dptsv`.
@@ -47,7 +47,8 @@ from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
-from pd_core.ocp.fuel import LPSolver, fuel_weights, new_highs  # noqa: E402
+from pd_core.ocp.fuel import fuel_weights  # noqa: E402
+from pd_core.ocp.lp import LPSolver, new_highs  # noqa: E402
 from pd_core.ocp.model import KN  # noqa: E402
 from pd_core.teachers.mpc import MPCController, MPCParams  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402

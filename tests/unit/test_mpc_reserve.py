@@ -14,17 +14,16 @@ from pd_core.config import BRAKE_MARGIN, LAND_SPEED_MPS, RL_THRUST, ThrustLimits
 from pd_core.experiments.evaluate import rollout
 from pd_core.ocp.fuel import (
     BrakeEnvelope,
-    LPSolver,
     envelope_excess,
     envelope_fuel_plan,
     fuel_lp_plan,
     fuel_weights,
-    solve_lp,
 )
+from pd_core.ocp.lp import LPSolver, solve_lp
 from pd_core.ocp.model import KN
 from pd_core.ocp.qp import _kkt_solve
-from pd_core.teachers.mpc import RESERVE_PARAMS, MPCController, brake_limited
-from pd_core.teachers.registry import CONTROLLERS, make_controller
+from pd_core.teachers.mpc import MPCController, brake_limited
+from pd_core.teachers.registry import CONTROLLERS, RESERVE_PARAMS, make_controller
 
 T_MAX_N = float(RL_THRUST.max_n[2])
 

@@ -72,7 +72,8 @@ from pd_core.config import (
 )
 from pd_core.discretise import eq5_levels
 from pd_core.dynamics import step_scalar
-from pd_core.ocp.fuel import LPSolver, fuel_lp_plan
+from pd_core.ocp.fuel import fuel_lp_plan
+from pd_core.ocp.lp import LPSolver
 from pd_core.ocp.qp import WarmStart, energy_qp_plan
 from pd_core.state import check_state
 
@@ -434,45 +435,3 @@ def brake_limited(
     if touchdown_speed_mps > 0.0 and z <= 0.0:
         return bool(s[5] ** 2 - 2.0 * a_z * max(s[2], 0.0) > touchdown_speed_mps**2)
     return bool(-vz > math.sqrt(land_speed_mps**2 + 2.0 * a_max * max(z, 0.0)))
-
-
-def mpc_controller(objective: str, fallback: Actor) -> MPCController:
-    """The teacher with the RL action set (Sec. 4.1) and the rounding measured best for its
-    objective (8 nominal episodes, bench/mpc_speed.py): the energy plans are smooth, and the
-    reference-carrying Eq. 5 tracks them (fuel 1.16x the fuel optimum, against 1.54x when
-    Eq. 6 is reset every step); the bang-bang fuel plans sit at their thrust limit, where the
-    carried reference lets the lander fall behind (crashes), so "eq5-replan" (1.19x, lands)."""
-    if objective not in ocp.OBJECTIVES:
-        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
-    rounding = "eq5" if objective == "energy" else "eq5-replan"
-    return MPCController(MPCParams(objective=objective, rounding=rounding), fallback)
-
-
-RESERVE_PARAMS = MPCParams(
-    objective="fuel",
-    rounding="nearest",
-    keep_brake_limit=True,
-    gate_altitude_m=0.5,
-    terminal_time_s=2.0,
-)
-
-
-def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> MPCController:
-    """`mpc-fuel-reserve` (issue 32): the fuel teacher flying its own plans within the runtime
-    layer's vertical reserve. Measured on nominal episodes behind the layer
-    (bench/mpc_diagnose.py, docs/experiments/2026-11-26-fuel-optimal-teacher.md):
-
-    * plans on 90 % of every axis's thrust (the vertical reserve the braking limit counts on);
-    * quantises to the nearest level ("eq5-replan" rounds every braking step up to full
-      thrust, 1.28x against 1.11x), then raises the vertical level where the layer's braking
-      limit would (`keep_brake_limit`): the layer and the teacher agree, and the layer changes
-      under 1 % of its steps (32 % for `mpc-fuel`);
-    * plans end at rest 0.5 m above the pad (2 m: the fallback's slow final descent costs
-      ~4 % of the fuel), and the t_f search stays (without it 1.22x, 80 % landed);
-    * the fallback lands the last 2 s of the plan (1 s: 6 of 300 nominal episodes land with
-      the lateral speed the plan still had to brake, 2.2-3.4 m/s; 2 s: 1 of 300, 0.6 % more
-      fuel). A lateral reserve (0.7 or 0.8 of the lateral thrust) did not help (3-4 of 300).
-    """
-    ctl = MPCController(params, fallback)
-    ctl.name = "mpc-fuel-reserve"
-    return ctl
