@@ -11,6 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from train_configs import small_config
 
 from pd_core.dqn.agent import DQNAgent
 from pd_core.dqn.config import TrainConfig, preset
@@ -23,25 +24,7 @@ needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a C
 
 
 def _small(tmp_path, name: str, base: str = "best", **kw) -> TrainConfig:
-    cfg = dict(
-        hidden=(32, 32),
-        num_envs=4,
-        learning_starts=200,
-        batch_agent=16,
-        batch_demo=16,
-        demos="",
-        controller_demo_episodes=4,
-        pretrain_updates=20,
-        max_updates=120,
-        eval_every_s=0.0,
-        checkpoint_every_s=1e9,
-        progress=False,
-        run_dir=str(tmp_path / name),
-        buffer_size=5000,
-        device="cpu",
-    )
-    cfg.update(kw)
-    return replace(preset(base), **cfg)
+    return small_config(tmp_path, name, base, **{"device": "cpu", **kw})
 
 
 def _weights(tr: Trainer) -> list[torch.Tensor]:

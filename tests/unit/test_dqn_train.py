@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from train_configs import small_config
 
 from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.config import TrainConfig, preset
@@ -23,24 +23,7 @@ NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_be
 
 
 def _small(tmp_path, name: str, **kw) -> TrainConfig:
-    base = dict(
-        hidden=(32, 32),
-        num_envs=4,
-        learning_starts=200,
-        batch_agent=16,
-        batch_demo=16,
-        demos="",
-        controller_demo_episodes=4,
-        pretrain_updates=20,
-        max_updates=120,
-        eval_every_s=0.0,
-        checkpoint_every_s=1e9,
-        progress=False,
-        run_dir=str(tmp_path / name),
-        buffer_size=5000,
-    )
-    base.update(kw)
-    return replace(preset("best"), **base)
+    return small_config(tmp_path, name, **kw)
 
 
 def _weights(tr: Trainer) -> list[torch.Tensor]:
