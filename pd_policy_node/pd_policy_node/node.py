@@ -30,8 +30,6 @@ Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import sys
 import time
@@ -157,13 +155,7 @@ def load_controller(
         runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
         what += f", runtime settings {settings}"
     layer = "no runtime layer" if runtime.config.is_off else "runtime layer on"
-    return runtime, f"{what}, {layer}, config {config_hash(runtime.config)})"
-
-
-def config_hash(config: RuntimeConfig) -> str:
-    """Short hash of a runtime config (the statistics line and the log name it)."""
-    text = json.dumps(config.to_dict(), sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
+    return runtime, f"{what}, {layer}, config {runtime.config.digest()})"
 
 
 class PolicyNode(Node):
@@ -181,7 +173,7 @@ class PolicyNode(Node):
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).
             self.policy.bare_action((TABLE3.lo + TABLE3.hi) / 2)
         self.model_file = model_file(p["controller"], p["model_path"])
-        self.config_hash = config_hash(self.policy.config)
+        self.config_hash = self.policy.config.digest()
         # (lander_id, episode) the runtime's memory belongs to
         self._episode: tuple[str, int] | None = None
         self.landers: dict[str, int] = {}  # states received per lander_id (non-empty ids)

@@ -450,3 +450,10 @@ def test_the_compiled_handover_is_the_fallbacks_own_lateral_limit():
     got = handover_mask(s, RL_THRUST.max_n, p, FALLBACK)
     assert 0.05 < want.mean() < 0.95  # both branches drawn
     np.testing.assert_array_equal(got, want)
+
+
+def test_a_runtime_config_digest_names_its_values():
+    """The digest the policy node logs and reports: equal configs share it, any change moves it."""
+    a, b = RuntimeConfig(), RuntimeConfig()
+    assert a.digest() == b.digest() and len(a.digest()) == 12
+    assert a.with_settings("thrust_margin=0.95").digest() != a.digest()

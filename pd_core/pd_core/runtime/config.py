@@ -16,6 +16,8 @@ file never takes a behaviour default from code. The evidence behind each default
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -209,6 +211,12 @@ class RuntimeConfig:
     def to_dict(self) -> dict[str, Any]:
         """Every field, nested by part (JSON-ready)."""
         return dataclasses.asdict(self)
+
+    def digest(self) -> str:
+        """12 hex digits of the SHA-256 of `to_dict` as sorted JSON: names this config in logs
+        and `/diagnostics`."""
+        text = json.dumps(self.to_dict(), sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
 
     @classmethod
     def from_dict(cls, d: Any) -> RuntimeConfig:
