@@ -168,12 +168,23 @@ def test_two_stacks_without_namespaces_fly_only_their_own_commands(tmp_path, mak
         assert "states of lander" in pol.log() and "second simulator" in pol.log(), pol.log()
 
     # This probe is the slow reader on a loaded machine: a command's state may still sit in its
-    # state queue when the stacks stop (another topic, another queue). Let it take them off.
+    # state queue when the stacks stop (another topic, another queue). Let it take them off. The
+    # probe may also discover a simulator later than that simulator's policy does (volatile QoS):
+    # commands answering states published before the probe first heard that lander's episode
+    # are left out, not counted against it.
+    def checked() -> list[ThrustCommand]:
+        first: dict[tuple[str, int], int] = {}
+        for s in states:
+            key = (s.lander_id, s.episode)
+            first[key] = min(first.get(key, s.step), s.step)
+        return [c for c in commands if c.step >= first.get((c.lander_id, c.episode), c.step + 1)]
+
     def answered_states_heard() -> bool:
         heard = {(s.lander_id, s.episode, s.step) for s in states}
-        return all((c.lander_id, c.episode, c.step) in heard for c in commands)
+        return all((c.lander_id, c.episode, c.step) in heard for c in checked())
 
     spin_until(answered_states_heard, 20.0)
     seen = {(s.lander_id, s.episode, s.step) for s in states}
     assert {c.lander_id for c in commands} == {"alpha", other}
-    assert all((c.lander_id, c.episode, c.step) in seen for c in commands)
+    assert len(checked()) > 0.9 * len(commands), (len(checked()), len(commands))
+    assert all((c.lander_id, c.episode, c.step) in seen for c in checked())
