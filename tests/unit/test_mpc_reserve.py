@@ -193,3 +193,29 @@ def test_envelope_plan_stays_inside_the_layers_limit_and_costs_more_than_the_res
     assert t_f > res.time_of_flight and fl.fuel > res.fuel
     assert np.all(p[:, 2] <= 0.9 * T_MAX_N + 1e-6)
     assert DEFAULT_ACTIONS.limits.hi[2] == T_MAX_N
+
+
+def test_lateral_settle_ends_the_horizontal_motion_before_the_plan_ends() -> None:
+    s = _nominal_starts(1, 2)[0]
+    lim = ThrustLimits(
+        tuple(0.9 * np.array(RL_THRUST.min_n)), tuple(0.9 * np.array(RL_THRUST.max_n))
+    )
+    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, lim)
+    res = ocp.solve_problem(pb)
+    g = pb.grid(res.time_of_flight)
+    free = fuel_lp_plan(pb, g, res.thrust, 8, LPSolver(), 10)
+    settled = fuel_lp_plan(pb, g, res.thrust, 8, LPSolver(), 10, lateral_settle_s=2.0)
+    assert free is not None and settled is not None
+    t_ctrl = np.linspace(0.0, g.t_f, pb.n_control)
+    last = t_ctrl >= g.t_f - 2.0
+    assert np.abs(free[last, 0:2]).max() > 100.0  # the optimum brakes sideways at the end
+    assert np.all(settled[last, 0:2] == 0.0)
+    fl = pb.fly(settled, g)
+    assert np.abs(fl.xf).max() <= 0.5 and np.abs(fl.vf).max() <= 0.1
+    # at rest sideways over the pad from the first held point on, for under 1 % more fuel
+    states, times = pb.simulate(settled, g.t_f)
+    before_end = times >= t_ctrl[last][0]
+    assert 0.0 <= t_ctrl[last][0] - (g.t_f - 2.0) < t_ctrl[1]  # within one control spacing
+    assert np.abs(states[before_end, 0:2]).max() < 0.5
+    assert np.abs(states[before_end, 3:5]).max() < 0.1
+    assert fl.fuel < 1.01 * pb.fly(free, g).fuel

@@ -142,16 +142,28 @@ def fuel_lp_plan(
     highs: highspy.Highs | None = None,
     floor_every: int = 0,
     envelope: BrakeEnvelope | None = None,
+    lateral_settle_s: float = 0.0,
 ) -> np.ndarray | None:
     """Control points (N, 3) N after up to `passes` LP passes from p at the fixed t_f of grid g,
     min sum_k w_k (p+ + p-) subject to the linearised terminal constraints (and, with
     `floor_every`, altitude >= 0 at every floor_every-th step; with `envelope`, the braking
     envelope, elastic); None if an LP is infeasible.
+
+    With `lateral_settle_s` > 0 the horizontal control points at or after t_f -
+    lateral_settle_s are held at 0 N: with no horizontal gravity the horizontal velocity is then
+    constant from the first held point on (within one control spacing after t_f -
+    lateral_settle_s), so the terminal rows (rest on the target) put the lander at rest above
+    it from there, and only the vertical axis flies the end.
     The receding-horizon teacher calls this with passes=1 and its own `highs`."""
     n = pb.n_control
     c = np.tile(fuel_weights(g), 6)  # [p+ axis 0, p- axis 0, p+ axis 1, ...]
     hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
     ub = np.repeat(hi_pm.reshape(-1), n)
+    if lateral_settle_s > 0.0:
+        settled = np.linspace(0.0, g.t_f, n) >= g.t_f - lateral_settle_s
+        ub = ub.reshape(3, 2, n)
+        ub[0:2, :, settled] = 0.0
+        ub = ub.reshape(-1)
     lb = np.zeros(6 * n)
     for _ in range(passes):
         jac, rhs, _ = pb.linearised(p, g)

@@ -111,6 +111,10 @@ class MPCParams:
     # ground leaves nothing for the quantisation and the disturbance
     gate_altitude_m: float = 2.0
     terminal_time_s: float = 1.0  # below this time-to-go the fallback law lands
+    # fuel plans hold the horizontal thrust at 0 over their last this many seconds, so the
+    # horizontal motion ends before the fallback lands (a fuel-optimal plan brakes it last,
+    # in the seconds the fallback flies); 0: off (see `fuel_lp_plan`)
+    lateral_settle_s: float = 0.0
     terminal_altitude_m: float = 0.5  # ... or below this height above the gate
     # "eq5" (reference carried), "eq5-replan" (reference reset each step) or "nearest" (the
     # nearest level, not the paper's; measured beside them in bench/mpc_speed.py)
@@ -351,7 +355,13 @@ class MPCController:
             plan = None if out is None else out[0]
         else:
             plan = fuel_lp_plan(
-                pb, g, warm, self.params.passes, self._highs, self.params.floor_every
+                pb,
+                g,
+                warm,
+                self.params.passes,
+                self._highs,
+                self.params.floor_every,
+                lateral_settle_s=self.params.lateral_settle_s,
             )
         if plan is None:
             return None
@@ -371,9 +381,13 @@ class MPCController:
         if not res.success or res.time_of_flight < self.params.terminal_time_s:
             return None  # no plan, or close enough to the pad for the fallback
         p, g = res.thrust, pb.grid(res.time_of_flight)
-        if self.params.objective == "fuel" and self.params.floor_every:
-            # the free-t_f fuel optimum may dive below the gate: LP passes with the floor
-            p = fuel_lp_plan(pb, g, p, 3, self._highs, self.params.floor_every)
+        settle = self.params.lateral_settle_s
+        if self.params.objective == "fuel" and (self.params.floor_every or settle):
+            # the free-t_f fuel optimum may dive below the gate, and brakes its horizontal
+            # motion last: LP passes with the floor and the settle
+            p = fuel_lp_plan(
+                pb, g, p, 3, self._highs, self.params.floor_every, lateral_settle_s=settle
+            )
             if p is None:
                 return None
         if pb.altitudes(pb.fly(p, g), g).min() < -self.params.underground_m:

@@ -33,6 +33,7 @@ RESERVE_PARAMS = MPCParams(
     keep_brake_limit=True,
     gate_altitude_m=0.5,
     terminal_time_s=2.0,
+    lateral_settle_s=2.0,
 )
 
 
@@ -50,7 +51,10 @@ def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> M
       ~4 % of the fuel), and the t_f search stays (without it 1.22x, 80 % landed);
     * the fallback lands the last 2 s of the plan (1 s: 6 of 300 nominal episodes land with
       the lateral speed the plan still had to brake, 2.2-3.4 m/s; 2 s: 1 of 300, 0.6 % more
-      fuel). A lateral reserve (0.7 or 0.8 of the lateral thrust) did not help (3-4 of 300).
+      fuel). A lateral reserve (0.7 or 0.8 of the lateral thrust) did not help (3-4 of 300);
+    * the plans hold the horizontal thrust at 0 over their last 1-2 s (`lateral_settle_s`):
+      the horizontal motion ends before the fallback lands the rest, where the fuel optimum
+      braked it last (docs/experiments/2026-11-26-teacher-endgame.md).
     """
     ctl = MPCController(params, fallback)
     ctl.name = "mpc-fuel-reserve"
