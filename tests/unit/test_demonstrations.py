@@ -17,6 +17,8 @@ from pd_core.dqn.demo_memory import (
 )
 from pd_core.dqn.train import training_reward
 from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.zemzev import ZemZevController
 
@@ -30,6 +32,22 @@ def test_controller_demonstrations_fly_the_dispersed_masses() -> None:
     assert np.ptp(m0) > 100.0  # Table 3 alone would give 2000 kg every time
     assert d["landed"].shape == (12,)
     assert float(d["success_rate"]) == d["landed"].mean()
+
+
+def test_demonstrations_behind_the_layer_hold_the_actions_it_flies() -> None:
+    # two steps of delay: the layer decides on the predicted state, so the flown actions differ
+    bare = controller_demonstrations("zemzev", 6, 3, dispersions="delay-2", workers=1)
+    layer = controller_demonstrations(
+        "zemzev", 6, 3, dispersions="delay-2", workers=1, behind_layer=True
+    )
+    flown = rollout(
+        Runtime(ZemZevController(), RuntimeConfig()), 6, 3, dispersions="delay-2",
+        keep_trajectories=6,
+    )  # fmt: skip
+    np.testing.assert_array_equal(layer["actions"], np.concatenate(flown.actions))
+    np.testing.assert_array_equal(layer["landed"], flown.landed)
+    n = min(len(bare["actions"]), len(layer["actions"]))
+    assert (bare["actions"][:n] != layer["actions"][:n]).mean() > 0.05
 
 
 def test_landed_only_keeps_exactly_the_landed_episodes() -> None:

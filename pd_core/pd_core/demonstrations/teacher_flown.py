@@ -27,6 +27,8 @@ from pd_core import ocp
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST
 from pd_core.experiments.evaluate import Rollouts, rollout
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.layer import Runtime
 from pd_core.teachers.registry import make_controller
 from pd_core.teachers.zemzev import ZemZevController
 
@@ -75,11 +77,13 @@ def _fly_chunk(
     dispersions: Any,
     initial_states: np.ndarray | None,
     episode_seeds: np.ndarray | None = None,
+    behind_layer: bool = False,
 ) -> dict[str, np.ndarray]:
     """Transitions of episodes first_episode .. + n - 1 (env seeds seed .., or episode_seeds)
-    of a fresh controller."""
+    of a fresh controller (behind the default runtime layer if `behind_layer`)."""
+    ctl = make_controller(controller)
     ro = rollout(
-        make_controller(controller),
+        Runtime(ctl, RuntimeConfig()) if behind_layer else ctl,
         n,
         seed,
         keep_trajectories=n,
@@ -100,13 +104,16 @@ def controller_demonstrations(
     workers: int | None = None,
     chunk: int = DEMO_CHUNK_EPISODES,
     episode_seeds: np.ndarray | None = None,
+    behind_layer: bool = False,
 ) -> dict[str, np.ndarray]:
     """Physical 1-step transitions of a controller of `pd_core.teachers.zemzev` (the MPC teacher
     `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
     seed + i, disturbances on; initial state sampled from Table 3 or row i of `initial_states`):
     states, actions, next_states, dones, episode, landed (per episode) and success_rate.
     `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
-    `pd_core.experiments.evaluate.rollout`; `workers` None = every core."""
+    `pd_core.experiments.evaluate.rollout`; `workers` None = every core. `behind_layer`: the
+    controller flies behind the default runtime layer (`pd_core.runtime.Runtime`), as a
+    student trained on the demonstrations will fly: the actions are the ones flown."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     make_controller(controller)  # an unknown name fails here, in the caller's process
@@ -120,6 +127,7 @@ def controller_demonstrations(
             dispersions,
             None if init is None else init[k : k + chunk],
             None if episode_seeds is None else np.asarray(episode_seeds)[k : k + chunk],
+            behind_layer,
         )
         for k in range(0, n_episodes, chunk)
     ]

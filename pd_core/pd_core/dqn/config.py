@@ -1,9 +1,10 @@
 """Training configuration: one dataclass, a docstring per field, turned into `pd-train` flags.
 
 Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200),
-`best` (what won our comparisons on the nominal problem) and `robust` (issue 10: trained under
-dispersions from the closed-loop OCP teacher; see models/<name>.md). Flags given on the command line
-override the preset.
+`best` (what won our comparisons on the nominal problem), `robust` (issue 10: trained under
+dispersions from ZEM/ZEV demonstrations; see models/<name>.md) and `ocp` (issue 32: from scratch,
+demonstrations of the optimal-control teacher `mpc-fuel-reserve` only). Flags given on the command
+line override the preset.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pd_core.config import DQN_PAPER
 @dataclass
 class TrainConfig:
     preset: str = "paper-agent1"
-    """preset the other fields start from: paper-agent1, paper-agent2, best or robust"""
+    """preset the other fields start from: paper-agent1, paper-agent2, best, robust or ocp"""
     seed: int = 1
     """seed of torch, numpy and the envs: the same seed gives the same weights on CPU"""
     episodes: int = DQN_PAPER.episodes
@@ -105,8 +106,9 @@ class TrainConfig:
     for among further episodes) instead of from any episode"""
     shield: bool = False
     """the policy flies behind the braking shield of pd_core.runtime.rules: the periodic evaluations
-    (hence best.pt) and the recovery search fly with it, and the saved policies' metadata asks
-    for it. Training episodes stay unshielded: shielding them left the overridden actions'
+    (hence best.pt), the recovery search and the controller demonstrations fly with it (the
+    demonstrations hold the actions flown), and the saved policies' metadata asks for it.
+    Training episodes stay unshielded: shielding them left the overridden actions'
     Q-values untrained and the median fuel drifted from 338 to 450 kg in 13 min"""
     init_policy: str = ""
     """policy file (.pt with its .json) whose weights start the Q and target networks: fine-tuning
@@ -213,6 +215,21 @@ PRESETS["robust"] = {
     "lr": 1e-4,
     "max_minutes": 30.0,
     "eval_episodes": 500,
+}
+
+# Ours for issue 32: learns from the optimal-control teacher only, from scratch. Demonstrations
+# flown by mpc-fuel-reserve behind the runtime layer under the `standard` dispersions (those that
+# landed), DQfD pre-training on them, then interaction; no ZEM/ZEV episode, no starting weights.
+PRESETS["ocp"] = {
+    **PRESETS["best"],
+    "near_pad": True,
+    "dispersions": "standard",
+    "controller": "mpc-fuel-reserve",
+    "controller_demo_episodes": 1500,
+    "demo_landed_only": True,
+    "shield": True,
+    "max_minutes": 40.0,
+    "eval_episodes": 300,
 }
 
 

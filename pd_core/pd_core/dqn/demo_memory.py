@@ -80,10 +80,12 @@ def controller_steps(
     landed_only: bool = False,
     initial_states: np.ndarray | None = None,
     episode_seeds: np.ndarray | None = None,
+    behind_layer: bool = False,
 ) -> tuple[PhysicalSteps, float]:
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
     env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
-    those that landed; its success rate. The MPC teacher flies on every core."""
+    those that landed; its success rate. The MPC teacher flies on every core. `behind_layer`:
+    the controller flies behind the runtime layer (a student trained with `shield` flies so)."""
     workers = None if name.startswith("mpc") else 1
     d = controller_demonstrations(
         name,
@@ -93,6 +95,7 @@ def controller_steps(
         initial_states=initial_states,
         workers=workers,
         episode_seeds=episode_seeds,
+        behind_layer=behind_layer,
     )
     keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
     steps = PhysicalSteps(
@@ -165,7 +168,7 @@ def recovery_steps(
         policy_path, n_episodes, seed, dispersions, failed_share, shield
     )
     steps, teacher = controller_steps(
-        name, n_episodes, seed, dispersions, landed_only, starts, episode_seeds=seeds
+        name, n_episodes, seed, dispersions, landed_only, starts, seeds, shield
     )
     return steps, teacher, student
 
@@ -199,7 +202,9 @@ def build_demo_memory(
                 k < cfg.controller_demo_episodes % len(names)
             )
             seed = cfg.seed + CONTROLLER_SEED_OFFSET + k * 1_000_000
-            steps, success = controller_steps(name, n, seed, cfg.dispersions, cfg.demo_landed_only)
+            steps, success = controller_steps(
+                name, n, seed, cfg.dispersions, cfg.demo_landed_only, behind_layer=cfg.shield
+            )
             parts.append(demo_transitions(steps, cfg, reward_cfg))
             info["controller"].append(
                 {
@@ -209,6 +214,7 @@ def build_demo_memory(
                     "success_rate": success,
                     "landed_only": cfg.demo_landed_only,
                     "dispersions": cfg.dispersions or "nominal",
+                    "behind_layer": cfg.shield,
                 }
             )
     if cfg.batch_demo > 0 and cfg.recovery_demo_episodes > 0 and names:
