@@ -36,7 +36,7 @@ DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balanc
 LABEL_CHUNK_STATES = 20
 
 
-def _map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None) -> list[Any]:
+def map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None) -> list[Any]:
     """fn(*task) for every task, in order; in a spawned process pool unless workers <= 1."""
     n = (os.cpu_count() or 1) if workers is None else workers
     if n <= 1 or len(tasks) <= 1:
@@ -131,7 +131,7 @@ def controller_demonstrations(
         )
         for k in range(0, n_episodes, chunk)
     ]
-    parts = _map_chunks(_fly_chunk, tasks, workers)
+    parts = map_chunks(_fly_chunk, tasks, workers)
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     out["success_rate"] = np.array(float(np.mean(out["landed"])))
     return out
@@ -186,7 +186,7 @@ def dagger_labels(
     if objective not in ocp.OBJECTIVES:
         raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
     tasks = [(s[k : k + chunk], objective) for k in range(0, len(s), chunk)]
-    parts = _map_chunks(_label_chunk, tasks, workers) if tasks else []
+    parts = map_chunks(_label_chunk, tasks, workers) if tasks else []
     labels = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
     solved = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=bool)
     return (labels, solved) if return_solved else labels

@@ -101,6 +101,10 @@ class TrainConfig:
     """DAgger-style demonstrations: episodes of the (first) `controller` started from states that
     `init_policy` visits under `dispersions`, one drawn uniformly along each of its episodes, so
     the teacher shows how to recover from where the student goes (kept as demo_landed_only says)"""
+    label_episodes: int = 0
+    """DAgger labels: `init_policy` flies this many episodes under `dispersions` behind the
+    runtime layer and the (first) `controller` labels, in shadow, every state it decides on
+    (pd_core.demonstrations.dagger); each label is a one-step demonstration"""
     recovery_failed_share: float = 0.0
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
@@ -248,6 +252,7 @@ _NON_NEGATIVE = (
     "margin",
     "controller_demo_episodes",
     "recovery_demo_episodes",
+    "label_episodes",
     "pretrain_updates",
     "eval_every_s",
     "checkpoint_every_s",

@@ -10,6 +10,7 @@ import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RewardConfig
+from pd_core.demonstrations.dagger import label_transitions, student_labels
 from pd_core.demonstrations.open_loop import load_demos
 from pd_core.demonstrations.teacher_flown import controller_demonstrations
 from pd_core.dqn.config import TrainConfig
@@ -23,6 +24,8 @@ CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
 RECOVERY_SEED_OFFSET = 60_000_000
 """... and the student episodes whose states start the recovery demonstrations, disjoint again."""
+LABEL_SEED_OFFSET = 70_000_000
+"""... and the student episodes the teacher labels (DAgger), disjoint again."""
 FAILURE_SEARCH_FACTOR = 50
 """The student flies at most this many times the recovery episodes looking for its failures."""
 FAILURE_SEARCH_CHUNK = 2000
@@ -241,6 +244,30 @@ def build_demo_memory(
             "student_success_rate": student,
             "failed_share": cfg.recovery_failed_share,
             "landed_only": cfg.demo_landed_only,
+        }
+    if cfg.batch_demo > 0 and cfg.label_episodes > 0 and names:
+        if not cfg.init_policy:
+            raise ValueError("label_episodes needs init_policy (the student whose states)")
+        d = student_labels(
+            cfg.init_policy,
+            names[0],
+            cfg.label_episodes,
+            cfg.seed + LABEL_SEED_OFFSET,
+            cfg.dispersions,
+        )
+        parts.append(
+            demo_transitions(
+                PhysicalSteps(**label_transitions(d["states"], d["labels"])), cfg, reward_cfg
+            )
+        )
+        info["labels"] = {
+            "teacher": names[0],
+            "student": cfg.init_policy,
+            "episodes": cfg.label_episodes,
+            "labels": len(d["labels"]),
+            "agreement": float(np.mean(d["labels"] == d["proposed"])),
+            "student_success_rate": float(np.mean(d["landed"])),
+            "dispersions": cfg.dispersions or "nominal",
         }
     if not parts:
         return None, info

@@ -1,0 +1,104 @@
+"""DAgger labels (issue 32): the teacher's action on every state the student decides on.
+
+The student (a policy file) flies episodes behind its runtime layer under the training
+dispersions. Beside it, in shadow, the teacher (a controller of `pd_core.teachers.registry`) is
+asked for its action on the very state the network is asked on (the layer's predicted state);
+the teacher never flies, and an MPC teacher re-plans warm from state to state as along its own
+flight. Each label becomes a one-step demonstration through the known dynamics (no
+disturbance, the nominal engine): the state, the teacher's action and the state that action
+leads to, so the DQfD memory's TD and margin losses take it like any other demonstration.
+
+Chunks of `LABEL_CHUNK_EPISODES` episodes (chunk k: env seeds seed + k * chunk ...) run on a
+spawned process pool (`map_chunks`), so the labels do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.config import DT_S
+from pd_core.demonstrations.teacher_flown import map_chunks
+from pd_core.env import transition
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.policy_file import load_policy
+from pd_core.teachers.registry import make_controller
+
+LABEL_CHUNK_EPISODES = 25  # ours: episodes per pool task (as the demonstrations)
+
+
+class ShadowTeacher:
+    """Actor that flies the student's actions and records the teacher's on the same states."""
+
+    def __init__(self, student: Any, teacher: Any) -> None:
+        self.student = student
+        self.teacher = teacher
+        self.name = getattr(student, "name", "student")
+        self.states: list[np.ndarray] = []
+        self.labels: list[np.ndarray] = []
+        self.proposed: list[np.ndarray] = []
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        s = np.array(states, dtype=float).reshape(-1, 7)
+        own = np.asarray(self.student.act_batch(s), dtype=np.int64).reshape(-1)
+        self.states.append(s)
+        self.labels.append(np.asarray(self.teacher.act_batch(s), dtype=np.int64).reshape(-1))
+        self.proposed.append(own)
+        return own
+
+
+def _label_chunk(
+    policy_path: str, teacher: str, n: int, seed: int, dispersions: Any
+) -> dict[str, np.ndarray]:
+    """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer."""
+    runtime = load_policy(policy_path, shield="always")
+    shadow = ShadowTeacher(runtime.actor, make_controller(teacher))
+    runtime.actor = shadow
+    ro = rollout(runtime, n, seed, dispersions=dispersions, chunk=n)
+    return {
+        "states": np.concatenate(shadow.states),
+        "labels": np.concatenate(shadow.labels),
+        "proposed": np.concatenate(shadow.proposed),
+        "landed": ro.landed,
+    }
+
+
+def student_labels(
+    policy_path: str,
+    teacher: str,
+    n_episodes: int,
+    seed: int,
+    dispersions: Any = "",
+    workers: int | None = None,
+    chunk: int = LABEL_CHUNK_EPISODES,
+) -> dict[str, np.ndarray]:
+    """The teacher's labels on the states the student at `policy_path` decides on over
+    episodes 0..n_episodes-1 (env seed seed + i, disturbances on, under `dispersions`):
+    states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, landed
+    (n_episodes,) the student's outcomes. `workers` None = every core."""
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    make_controller(teacher)  # an unknown name fails here, in the caller's process
+    tasks = [
+        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions)
+        for k in range(0, n_episodes, chunk)
+    ]
+    parts = map_chunks(_label_chunk, tasks, workers)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def label_transitions(states: np.ndarray, labels: np.ndarray) -> dict[str, np.ndarray]:
+    """One-step demonstrations of labels: states (N, 7), actions, next_states through the
+    nominal dynamics with no disturbance, dones (touchdown) and one episode id per label."""
+    s = np.asarray(states, dtype=float).reshape(-1, 7)
+    a = np.asarray(labels, dtype=np.int64).reshape(-1)
+    nxt, _r, done, _ok = transition(s, DEFAULT_ACTIONS.thrust(a), np.zeros((len(a), 3)), DT_S)
+    return {
+        "states": s,
+        "actions": a,
+        "next_states": nxt,
+        "dones": np.asarray(done, dtype=bool),
+        "episode": np.arange(len(a), dtype=np.int64),
+    }

@@ -1,0 +1,51 @@
+"""DAgger labels (issue 32): the teacher labels, in shadow, the states the student decides on."""
+
+from pathlib import Path
+
+import numpy as np
+
+from pd_core.actions import DEFAULT_ACTIONS
+from pd_core.config import DT_S
+from pd_core.demonstrations.dagger import label_transitions, student_labels
+from pd_core.dqn.config import preset
+from pd_core.dqn.demo_memory import build_demo_memory
+from pd_core.dqn.train import training_reward
+from pd_core.dynamics import step
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.policy_file import load_policy
+from pd_core.teachers.zemzev import ZemZevController
+
+POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+
+
+def test_labels_are_the_teachers_actions_on_the_states_the_student_flies() -> None:
+    d = student_labels(POLICY, "zemzev", 3, 21, dispersions="delay", workers=1)
+    flown = rollout(load_policy(POLICY, shield="always"), 3, 21, dispersions="delay")
+    assert len(d["labels"]) == len(d["states"]) == len(d["proposed"]) == flown.steps.sum()
+    np.testing.assert_array_equal(d["landed"], flown.landed)
+    # ZEM/ZEV keeps no memory: its labels are its actions on those states, and the student's
+    # own proposals are its network's; the two disagree somewhere (else nothing to learn)
+    np.testing.assert_array_equal(d["labels"], ZemZevController().act_batch(d["states"]))
+    net = load_policy(POLICY, shield="never").actor
+    np.testing.assert_array_equal(d["proposed"], net.act_batch(d["states"]))
+    assert 0.0 < np.mean(d["labels"] != d["proposed"]) < 1.0
+
+
+def test_label_transitions_step_the_nominal_dynamics() -> None:
+    s = np.array([[10.0, -5.0, 300.0, 1.0, 0.5, -20.0, 1900.0], [0.1, 0.0, 0.05, 0, 0, -1.0, 1700]])
+    t = label_transitions(s, np.array([100, 3]))
+    want = step(s, DEFAULT_ACTIONS.thrust(np.array([100, 3])), np.zeros((2, 3)), DT_S)
+    np.testing.assert_allclose(t["next_states"], want)
+    assert t["dones"].tolist() == [False, True]  # the second one touches down
+    assert t["episode"].tolist() == [0, 1]  # each label stands alone
+
+
+def test_demo_memory_takes_the_labels_of_the_init_policy() -> None:
+    cfg = preset(
+        "best", controller="zemzev", controller_demo_episodes=0, label_episodes=2,
+        init_policy=POLICY, dispersions="gusts", n_step=3,
+    )  # fmt: skip
+    memory, info = build_demo_memory(cfg, training_reward(cfg))
+    assert info["labels"]["episodes"] == 2 and info["labels"]["teacher"] == "zemzev"
+    assert len(memory) == info["labels"]["labels"] > 100
+    assert 0.0 < info["labels"]["agreement"] <= 1.0
