@@ -7,6 +7,14 @@
 #   3. the same again from stage 2's best.pt (13.5 min, about 4 of them the recovery search;
 #      11 min before the clock counted the set-up, 3 seeds measured worse). The recipe's policy
 #      is stage 3's final.pt. In all about 59 min.
+#
+# With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
+# mpc-fuel-reserve, from scratch, under the `standard` dispersions, behind the runtime layer:
+#   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction (30 min);
+#   2. DAgger round 1: stage 1's best.pt flies 1000 episodes, the teacher labels every state
+#      it decides on (pd-train --label-episodes), plus 500 teacher episodes (30 min);
+#   3. DAgger round 2 from stage 2's best.pt (25 min). The recipe's policy is stage 3's best.pt.
+#
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
 # recipe goes on where it stopped.
@@ -15,7 +23,7 @@ set -euo pipefail
 usage() {
     cat <<'EOF'
 usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
-                              [--dry-run] [-h]
+                              [--teacher zemzev-vernier|ocp] [--dry-run] [-h]
 
   --seed S         training seed of every stage (default 1)
   --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
@@ -23,6 +31,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    a 20 min snapshot of stage 1 with seed 1)
   --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
                    as it was before them, Eq. 21's 7 inputs only
+  --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
+                   teacher's recipe (demonstrations, then two DAgger rounds; about 85 min;
+                   the policy is DIR/stage3/best.pt, default DIR runs/ocp__S)
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 Each stage uses one torch thread, so two seeds can train side by side on two cores. The
@@ -35,6 +46,7 @@ seed=1
 out=""
 stage1=""
 dry=0
+teacher=zemzev-vernier
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
     case "$1" in
@@ -43,13 +55,19 @@ while [[ $# -gt 0 ]]; do
         --out) out="${2:?--out needs a directory}"; shift 2 ;;
         --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
         --paper-inputs) near_pad=(); shift ;;
+        --teacher) teacher="${2:?--teacher needs zemzev-vernier or ocp}"; shift 2 ;;
         --dry-run) dry=1; shift ;;
         *) echo "train_recipe.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
 [[ "$seed" =~ ^[0-9]+$ ]] || { echo "train_recipe.sh: --seed must be a non-negative integer, got '$seed'" >&2; exit 2; }
 [[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
-out="${out:-runs/recipe__$seed}"
+[[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
+if [[ "$teacher" == ocp ]]; then
+    out="${out:-runs/ocp__$seed}"
+else
+    out="${out:-runs/recipe__$seed}"
+fi
 
 FINE_TUNE=(--preset robust --controller zemzev-vernier --precision-bonus 10
     --recovery-failed-share 0.5 --shield --dispersions broad "${near_pad[@]}")
@@ -77,6 +95,18 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
     echo "== $name: $(((SECONDS - t0) / 60)) min $(((SECONDS - t0) % 60)) s"
 }
 
+if [[ "$teacher" == ocp ]]; then
+    DAGGER=(--preset ocp --label-episodes 1000 --controller-demo-episodes 500
+        --pretrain-updates 40000 --lr 1e-4 --precision-bonus 10)
+    if [[ -z "$stage1" ]]; then
+        stage stage1 --preset ocp --max-minutes 30
+        stage1="$out/stage1/best.pt"
+    fi
+    stage stage2 "${DAGGER[@]}" --init-policy "$stage1" --max-minutes 30
+    stage stage3 "${DAGGER[@]}" --init-policy "$out/stage2/best.pt" --max-minutes 25
+    ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/best.pt"
+    exit 0
+fi
 if [[ -z "$stage1" ]]; then
     stage stage1 --preset best --max-minutes 20
     stage1="$out/stage1/best.pt"

@@ -53,6 +53,20 @@ def test_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(tmp_pat
     assert sum(c["max_minutes"] for c in (s1, s2, s3)) <= 60.0
 
 
+def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_in_ninety_minutes(
+    tmp_path, capsys
+):
+    out = tmp_path / "r"
+    s1, s2, s3 = stage_configs(capsys, "--teacher", "ocp", "--out", str(out))
+    for cfg in (s1, s2, s3):
+        assert cfg["preset"] == "ocp" and cfg["controller"] == "mpc-fuel-reserve"
+        assert cfg["demos"] == "" and cfg["shield"] is True and cfg["dispersions"] == "standard"
+    assert s1["init_policy"] in ("", None) and s1["label_episodes"] == 0
+    assert s2["init_policy"] == f"{out}/stage1/best.pt" and s2["label_episodes"] == 1000
+    assert s3["init_policy"] == f"{out}/stage2/best.pt" and s3["label_episodes"] == 1000
+    assert sum(c["max_minutes"] for c in (s1, s2, s3)) <= 90.0
+
+
 def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
     start = tmp_path / "start.pt"
     start.write_bytes(b"")
@@ -97,6 +111,7 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--seed", "x"], "--seed must be a non-negative integer"),
         (["--bogus"], "unknown argument '--bogus'"),
         (["--stage1", "/nonexistent.pt"], "--stage1 file not found"),
+        (["--teacher", "zemzev"], "--teacher must be zemzev-vernier or ocp"),
     ],
 )
 def test_bad_flag_is_one_line(args, named):

@@ -232,7 +232,7 @@ PRESETS["ocp"] = {
     "controller_demo_episodes": 1500,
     "demo_landed_only": True,
     "shield": True,
-    "max_minutes": 40.0,
+    "max_minutes": 30.0,
     "eval_episodes": 300,
 }
 
