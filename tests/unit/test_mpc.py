@@ -7,11 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pd_core import discretise as disc
-from pd_core import ocp
-from pd_core.config import RL_THRUST
 from pd_core.demonstrations.open_loop import table1_initial_states
-from pd_core.demonstrations.teacher_flown import dagger_labels, mpc_demonstrations
+from pd_core.demonstrations.teacher_flown import mpc_demonstrations
 from pd_core.experiments.evaluate import rollout
 from pd_core.teachers.mpc import MPCController, MPCParams
 from pd_core.teachers.registry import CONTROLLERS, make_controller
@@ -84,16 +81,3 @@ def test_actions_depend_only_on_each_episodes_own_history() -> None:
     same = together["episode"][1:] == together["episode"][:-1]  # consecutive steps of an episode
     np.testing.assert_array_equal(together["next_states"][:-1][same], together["states"][1:][same])
     assert float(together["success_rate"]) == 1.0
-
-
-def test_dagger_labels_equal_the_ocp_discretised_first_action() -> None:
-    states = CASES[[0, 9, 32]].copy()
-    states[1, 2] = 400.0  # a state the agent might visit mid-flight
-    labels, solved = dagger_labels(states, "energy", workers=1, return_solved=True)
-    assert solved.all()
-    for s, a in zip(states, labels, strict=True):
-        res = ocp.solve(s[0:3], s[3:6], s[6], objective="energy", limits=RL_THRUST)
-        assert a == disc.discretise(res).actions[0]  # Eqs. 5-7 of the open-loop demos
-    hopeless = np.array([[0.0, 0.0, 30.0, 0.0, 0.0, -90.0, 1100.0]])
-    labels, solved = dagger_labels(hopeless, "fuel", workers=1, return_solved=True)
-    assert not solved[0] and labels[0] == ZemZevController().act(hopeless[0])

@@ -1,3 +1,3 @@
-"""Demonstrations for the DQN (Sec. 2.3): open-loop OCP episodes (`open_loop`) and episodes and
-DAgger labels flown by a closed-loop teacher (`teacher_flown`). The replay memory that holds them
-in training is `pd_core.dqn.demo_memory`."""
+"""Demonstrations for the DQN (Sec. 2.3): open-loop OCP episodes (`open_loop`), episodes flown by
+a closed-loop teacher (`teacher_flown`) and the teacher's labels on the states a student flies
+(`dagger`). The replay memory that holds them in training is `pd_core.dqn.demo_memory`."""

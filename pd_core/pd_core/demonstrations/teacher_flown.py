@@ -1,13 +1,10 @@
-"""Demonstrations from the closed-loop optimal-control teacher (issue 10): episodes and labels.
+"""Demonstrations flown by a closed-loop teacher (issue 10): `controller_demonstrations`
+(`mpc_demonstrations` for the MPC teacher) are episodes flown by the receding-horizon teacher
+(`pd_core.teachers.mpc`) or another controller in the disturbed environment (and any
+dispersions), bare or behind the runtime layer, as 1-step transitions for
+`pd_core.dqn.demo_memory`.
 
-* `controller_demonstrations` (`mpc_demonstrations` for the teacher): episodes flown by the
-  receding-horizon teacher (`pd_core.teachers.mpc`) or another controller in the disturbed
-  environment
-  (and any dispersions), as 1-step transitions for `pd_core.dqn.demo_memory`.
-* `dagger_labels`: the OCP's discretised first action from each given state (DAgger-style expert
-  labels on states the agent itself visits).
-
-Both spread seeded chunks of fixed size over a process pool: chunk k always holds the same
+`map_chunks` spreads seeded chunks of fixed size over a process pool: chunk k always holds the same
 episodes (seeds seed + k * chunk ...) flown by a fresh teacher, so the result does not depend on
 the number of workers. Workers are spawned, not forked (the caller may hold torch threads).
 """
@@ -22,18 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from pd_core import discretise as disc
 from pd_core import ocp
-from pd_core.actions import DEFAULT_ACTIONS
-from pd_core.config import RL_THRUST
 from pd_core.experiments.evaluate import Rollouts, rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.teachers.registry import make_controller
-from pd_core.teachers.zemzev import ZemZevController
 
 DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balance 2 workers)
-LABEL_CHUNK_STATES = 20
 
 
 def map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None) -> list[Any]:
@@ -144,49 +136,3 @@ def mpc_demonstrations(
     if objective not in ocp.OBJECTIVES:
         raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
     return controller_demonstrations(f"mpc-{objective}", n_episodes, seed, **kw)
-
-
-def ocp_first_action(state: np.ndarray, objective: str) -> int | None:
-    """Eq. 5 action of the first step of the OCP solved from `state` (7,) with the RL thrust
-    limits (Sec. 4.1), or None when it has no solution."""
-    res = ocp.solve(state[0:3], state[3:6], state[6], objective=objective, limits=RL_THRUST)
-    if not res.success:
-        return None
-    a_star, v_next = disc.reference(res, RL_THRUST)
-    n = np.asarray(DEFAULT_ACTIONS.n_per_axis)
-    levels = disc.eq5_levels(a_star[0], v_next[0] - state[3:6], n)
-    return int(DEFAULT_ACTIONS.levels_to_action(levels[None])[0])
-
-
-def _label_chunk(states: np.ndarray, objective: str) -> tuple[np.ndarray, np.ndarray]:
-    fallback = ZemZevController()
-    labels = np.empty(len(states), dtype=np.int64)
-    solved = np.zeros(len(states), dtype=bool)
-    for i, s in enumerate(states):
-        a = ocp_first_action(s, objective)
-        solved[i] = a is not None
-        labels[i] = fallback.act(s) if a is None else a
-    return labels, solved
-
-
-def dagger_labels(
-    states: np.ndarray,
-    objective: str = "fuel",
-    *,
-    workers: int | None = None,
-    chunk: int = LABEL_CHUNK_STATES,
-    return_solved: bool = False,
-) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Expert labels (B,) int64: the OCP's discretised first action from each state (B, 7).
-
-    A state from which the OCP has no solution (on or below the pad, out of fuel, beyond the
-    thrust) gets the ZEM/ZEV action instead; `return_solved` also returns which were solved.
-    """
-    s = np.atleast_2d(np.asarray(states, dtype=float))
-    if objective not in ocp.OBJECTIVES:
-        raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
-    tasks = [(s[k : k + chunk], objective) for k in range(0, len(s), chunk)]
-    parts = map_chunks(_label_chunk, tasks, workers) if tasks else []
-    labels = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
-    solved = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=bool)
-    return (labels, solved) if return_solved else labels

@@ -54,7 +54,7 @@ def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> M
       fuel). A lateral reserve (0.7 or 0.8 of the lateral thrust) did not help (3-4 of 300);
     * the plans hold the horizontal thrust at 0 over their last 1-2 s (`lateral_settle_s`):
       the horizontal motion ends before the fallback lands the rest, where the fuel optimum
-      braked it last (docs/experiments/2026-11-26-teacher-endgame.md).
+      braked it last (docs/experiments/2026-11-26-ocp-student.md).
     """
     ctl = MPCController(params, fallback)
     ctl.name = "mpc-fuel-reserve"
