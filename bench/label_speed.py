@@ -9,8 +9,8 @@ worker and on every core, side by side in one run, with the ratios (issue 32).
 Both under the `standard` dispersions, the same episodes on 1 and on N workers (spawned
 processes; each worker's start-up, about 3 s, is counted).
 
-    python bench/label_speed.py [--policy models/pd_dqn_robust.pt] [--teacher mpc-fuel-reserve]
-                                [--episodes 100] [--workers N]
+    python bench/label_speed.py [--policy models/pd_dqn_ocp.pt] [--teacher mpc-fuel-reserve]
+                                [--episodes 40] [--workers N]
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--policy", default=str(ROOT / "models" / "pd_dqn_robust.pt"))
+    ap.add_argument("--policy", default=str(ROOT / "models" / "pd_dqn_ocp.pt"))
     ap.add_argument("--teacher", default="mpc-fuel-reserve")
-    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--episodes", type=int, default=40)
     ap.add_argument("--dispersions", default="standard")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     a = ap.parse_args(argv)

@@ -13,7 +13,9 @@
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction (30 min);
 #   2. DAgger round 1: stage 1's best.pt flies 1000 episodes, the teacher labels every state
 #      it decides on (pd-train --label-episodes), plus 500 teacher episodes (30 min);
-#   3. DAgger round 2 from stage 2's best.pt (25 min). The recipe's policy is stage 3's best.pt.
+#   3. DAgger round 2 from stage 2's best.pt (13 min: its best.pt came 9 min in, at the end
+#      of the pre-training; the interaction after it lowered the evaluations). About 73 min in
+#      all. The recipe's policy is stage 3's best.pt (models/pd_dqn_ocp.pt for seed 1).
 #
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
@@ -32,7 +34,7 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
-                   teacher's recipe (demonstrations, then two DAgger rounds; about 85 min;
+                   teacher's recipe (demonstrations, then two DAgger rounds; about 73 min;
                    the policy is DIR/stage3/best.pt, default DIR runs/ocp__S)
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
@@ -103,7 +105,7 @@ if [[ "$teacher" == ocp ]]; then
         stage1="$out/stage1/best.pt"
     fi
     stage stage2 "${DAGGER[@]}" --init-policy "$stage1" --max-minutes 30
-    stage stage3 "${DAGGER[@]}" --init-policy "$out/stage2/best.pt" --max-minutes 25
+    stage stage3 "${DAGGER[@]}" --init-policy "$out/stage2/best.pt" --max-minutes 13
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/best.pt"
     exit 0
 fi
