@@ -1,0 +1,34 @@
+"""models/pd_dqn_ocp (issue 32): the file names only optimal-control demonstrations and labels,
+starts from no other file, and flies behind the default runtime layer."""
+
+import json
+from pathlib import Path
+
+from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.policy_file import load_policy
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_ocp"
+
+
+def test_every_demonstration_and_label_of_the_lineage_came_from_the_ocp_teacher() -> None:
+    meta = json.loads(MODEL.with_suffix(".json").read_text())
+    stages = meta["training"]["lineage"]["stages"]
+    assert len(stages) == 3
+    for stage in stages:
+        demos = stage["demos"]
+        assert "file" not in demos  # no open-loop file, no ZEM/ZEV episode
+        assert {c["name"] for c in demos["controller"]} == {"mpc-fuel-reserve"}
+        assert all(c["behind_layer"] for c in demos["controller"])
+        if "labels" in demos:
+            assert demos["labels"]["teacher"] == "mpc-fuel-reserve"
+    assert "labels" not in stages[0]["demos"] and "labels" in stages[2]["demos"]
+    assert "init-policy" not in stages[0]["command"]  # from scratch
+
+
+def test_it_flies_behind_the_default_runtime_layer_and_lands() -> None:
+    rt = load_policy(MODEL.with_suffix(".pt"))
+    assert rt.config == RuntimeConfig()
+    ro = rollout(rt, 20, 0)
+    assert ro.landed.sum() >= 19
+    assert rt.changed < 0.2 * ro.steps.sum()  # the layer decides a minority of the steps
