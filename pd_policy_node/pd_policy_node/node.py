@@ -190,6 +190,7 @@ class PolicyNode(Node):
         # per lander_id: (episode, step) of the last state received
         self._last: dict[str, tuple[int, int]] = {}
         self._answered: tuple[str, int, int] | None = None  # lander, episode, step last answered
+        self._last_cmd: ThrustCommand | None = None  # the command that answered it
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
@@ -260,9 +261,13 @@ class PolicyNode(Node):
         if msg.status != LanderState.FLYING:
             return  # the episode is over: nothing to answer
         if (msg.lander_id, msg.episode, msg.step) == self._answered:
-            # Sent again (lockstep resend) while our answer was on its way: a slow controller
-            # would otherwise pile up solves of the same state. A new node still answers it.
+            # Sent again (lockstep resend): our answer was on its way, or lost (sent before the
+            # simulator's subscription matched). The same command goes again, not a new
+            # decision: a slow controller would otherwise pile up solves of the same state, and
+            # the simulator drops a second copy as a duplicate.
             self.repeats += 1
+            if self._last_cmd is not None:
+                self._cmd_pub.publish(self._last_cmd)
             return
         try:
             state = check_state(state_from_msg(msg))
@@ -278,7 +283,8 @@ class PolicyNode(Node):
                     f"sent: {exc} [{self.invalid} invalid states so far]"
                 )
             return
-        self._cmd_pub.publish(command_msg(msg, action, self.policy.thrust(action)))
+        self._last_cmd = command_msg(msg, action, self.policy.thrust(action))
+        self._cmd_pub.publish(self._last_cmd)
         dt = time.perf_counter() - t0
         self._status_pub.publish(guidance_msg(msg, decision, dt))
         self._answered = (msg.lander_id, msg.episode, msg.step)
