@@ -32,6 +32,16 @@ def _nominal_starts(n: int, seed: int = 0) -> np.ndarray:
     return rollout(make_controller("zemzev"), n, seed).initial_states
 
 
+def _reserve_problem(seed: int) -> tuple[ocp.Problem, ocp.OCPResult]:
+    """The fuel problem on 90 % of the RL limits from nominal start `seed`, and its optimum."""
+    s = _nominal_starts(1, seed)[0]
+    lim = ThrustLimits(
+        tuple(0.9 * np.array(RL_THRUST.min_n)), tuple(0.9 * np.array(RL_THRUST.max_n))
+    )
+    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, lim)
+    return pb, ocp.solve_problem(pb)
+
+
 def test_brake_limited_is_the_runtime_layers_rule() -> None:
     from pd_core.runtime.config import RulesConfig
     from pd_core.runtime.rules import brake_mask
@@ -123,12 +133,7 @@ def test_lp_solver_warm_basis_gives_the_same_optimum_as_a_cold_solve() -> None:
 
 
 def test_the_warm_lp_re_plan_gives_the_cold_plans_fuel() -> None:
-    s = _nominal_starts(1, 1)[0]
-    lim = ThrustLimits(
-        tuple(0.9 * np.array(RL_THRUST.min_n)), tuple(0.9 * np.array(RL_THRUST.max_n))
-    )
-    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, lim)
-    res = ocp.solve_problem(pb)
+    pb, res = _reserve_problem(1)
     warm = LPSolver(warm=True)
     p = res.thrust
     for k in range(1, 6):  # five LPs, each at 0.1 s more time-to-go
@@ -174,12 +179,7 @@ def test_kkt_tridiagonal_solve_is_the_banded_solve() -> None:
 
 @pytest.mark.timeout(300)
 def test_envelope_plan_stays_inside_the_layers_limit_and_costs_more_than_the_reserve() -> None:
-    s = _nominal_starts(1, 0)[0]
-    lim = ThrustLimits(
-        tuple(0.9 * np.array(RL_THRUST.min_n)), tuple(0.9 * np.array(RL_THRUST.max_n))
-    )
-    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, lim)
-    res = ocp.solve_problem(pb)
+    pb, res = _reserve_problem(0)
     env = BrakeEnvelope(BRAKE_MARGIN, T_MAX_N, LAND_SPEED_MPS, 0.0, 0.0, 1)
     # the 0.9 reserve optimum counts on the lighter mass it brakes with: outside the limit
     assert envelope_excess(pb, pb.grid(res.time_of_flight), res.thrust, env) > 1.0
@@ -196,12 +196,7 @@ def test_envelope_plan_stays_inside_the_layers_limit_and_costs_more_than_the_res
 
 
 def test_lateral_settle_ends_the_horizontal_motion_before_the_plan_ends() -> None:
-    s = _nominal_starts(1, 2)[0]
-    lim = ThrustLimits(
-        tuple(0.9 * np.array(RL_THRUST.min_n)), tuple(0.9 * np.array(RL_THRUST.max_n))
-    )
-    pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, lim)
-    res = ocp.solve_problem(pb)
+    pb, res = _reserve_problem(2)
     g = pb.grid(res.time_of_flight)
     free = fuel_lp_plan(pb, g, res.thrust, 8, LPSolver(), 10)
     settled = fuel_lp_plan(pb, g, res.thrust, 8, LPSolver(), 10, lateral_settle_s=2.0)
