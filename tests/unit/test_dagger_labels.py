@@ -9,7 +9,7 @@ from pd_core.config import DT_S
 from pd_core.demonstrations.dagger import label_transitions, student_labels
 from pd_core.dqn.config import preset
 from pd_core.dqn.demo_memory import build_demo_memory
-from pd_core.dqn.train import training_reward
+from pd_core.dqn.train import Trainer, training_reward
 from pd_core.dynamics import step
 from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.policy_file import load_policy
@@ -49,3 +49,23 @@ def test_demo_memory_takes_the_labels_of_the_init_policy() -> None:
     assert info["labels"]["episodes"] == 2 and info["labels"]["teacher"] == "zemzev"
     assert len(memory) == info["labels"]["labels"] > 100
     assert 0.0 < info["labels"]["agreement"] <= 1.0
+
+
+def test_dagger_rounds_add_labels_of_the_current_network_and_end_the_run(tmp_path: Path) -> None:
+    cfg = preset(
+        "best", controller="zemzev", controller_demo_episodes=2, label_episodes=2,
+        dagger_rounds=2, pretrain_updates=30, num_envs=2, eval_episodes=2, eval_every_s=0.0,
+        progress=False, torch_threads=1, max_minutes=10.0,
+    )  # fmt: skip
+    trainer = Trainer(cfg, run_dir=tmp_path, quiet=True)
+    demos = len(trainer.demo)
+    out = trainer.run()
+    rounds = trainer.demo_info["dagger_rounds"]
+    assert out["stop_reason"] == "dagger_rounds" and out["episodes"] == 0  # no interaction
+    assert out["updates"] == 3 * 30  # pre-training before, between and after the rounds
+    assert [r["round"] for r in rounds] == [1, 2] and all(r["episodes"] == 2 for r in rounds)
+    # aggregated: every earlier demonstration stays, each round's labels join them
+    assert len(trainer.demo) == demos + sum(r["labels"] for r in rounds) > demos + 200
+    assert (tmp_path / "dagger_student.pt").is_file()
+    resumed = Trainer.resume(tmp_path)
+    assert resumed.dagger_round == 2 and len(resumed.demo) == len(trainer.demo)

@@ -105,6 +105,11 @@ class TrainConfig:
     """DAgger labels: `init_policy` flies this many episodes under `dispersions` behind the
     runtime layer and the (first) `controller` labels, in shadow, every state it decides on
     (pd_core.demonstrations.dagger); each label is a one-step demonstration"""
+    dagger_rounds: int = 0
+    """DAgger rounds after pre-training (Ross et al. 2011, aggregated): each flies the current
+    network on `label_episodes` new episodes, adds the teacher's labels to the demonstrations
+    (none is dropped), then pre-trains `pretrain_updates` more; the run ends after the last
+    round, with no interaction phase (0: none)"""
     recovery_failed_share: float = 0.0
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
@@ -236,6 +241,20 @@ PRESETS["ocp"] = {
     "eval_episodes": 300,
 }
 
+# Ours for issue 32: DAgger after `ocp` (needs --init-policy, the `ocp` run's best.pt). Each
+# round the current network flies 500 new `standard` episodes behind its layer, mpc-fuel-reserve
+# labels every state it decides on, the labels join all earlier ones (aggregated) and 20k
+# pre-training updates follow; 500 more teacher episodes at the start; no interaction phase.
+PRESETS["ocp-dagger"] = {
+    **PRESETS["ocp"],
+    "controller_demo_episodes": 500,
+    "label_episodes": 500,
+    "dagger_rounds": 6,
+    "pretrain_updates": 20_000,
+    "lr": 1e-4,
+    "precision_bonus": 10.0,
+    "max_minutes": 50.0,
+}
 
 SCENARIO_SAMPLING = ("uniform", "failures")
 DEVICES = ("auto", "cpu", "cuda")
@@ -253,6 +272,7 @@ _NON_NEGATIVE = (
     "controller_demo_episodes",
     "recovery_demo_episodes",
     "label_episodes",
+    "dagger_rounds",
     "pretrain_updates",
     "eval_every_s",
     "checkpoint_every_s",
@@ -290,6 +310,8 @@ def check_config(cfg: TrainConfig) -> None:
             "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
             f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
         )
+    if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):
+        raise ValueError("dagger_rounds needs label_episodes, batch_demo and pretrain_updates > 0")
     if cfg.device not in DEVICES:
         raise ValueError(f"device must be one of {DEVICES}, got {cfg.device!r}")
     if not cfg.hidden or min(cfg.hidden) < 1:

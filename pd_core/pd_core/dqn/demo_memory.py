@@ -187,6 +187,34 @@ def file_steps(path: Path) -> PhysicalSteps:
     return PhysicalSteps(ds.states, ds.actions, ds.next_states, ds.dones, ds.episode)
 
 
+def label_part(
+    cfg: TrainConfig, reward_cfg: RewardConfig, policy_path: str, round_index: int
+) -> tuple[DemoTransitions, dict[str, Any]]:
+    """DAgger round `round_index`: the (first) `controller` labels every state the policy at
+    `policy_path` decides on over `label_episodes` episodes under `dispersions` (env seeds
+    seed + LABEL_SEED_OFFSET + round_index * label_episodes + i, new episodes each round), as
+    one-step demonstrations; and what the round saw."""
+    teacher = cfg.controller.split(",")[0].strip()
+    d = student_labels(
+        policy_path,
+        teacher,
+        cfg.label_episodes,
+        cfg.seed + LABEL_SEED_OFFSET + round_index * cfg.label_episodes,
+        cfg.dispersions,
+    )
+    steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
+    return demo_transitions(steps, cfg, reward_cfg), {
+        "round": round_index,
+        "teacher": teacher,
+        "student": policy_path,
+        "episodes": cfg.label_episodes,
+        "labels": len(d["labels"]),
+        "agreement": float(np.mean(d["labels"] == d["proposed"])),
+        "student_success_rate": float(np.mean(d["landed"])),
+        "dispersions": cfg.dispersions or "nominal",
+    }
+
+
 def build_demo_memory(
     cfg: TrainConfig, reward_cfg: RewardConfig
 ) -> tuple[DemoMemory | None, dict[str, Any]]:
@@ -246,29 +274,11 @@ def build_demo_memory(
             "landed_only": cfg.demo_landed_only,
         }
     if cfg.batch_demo > 0 and cfg.label_episodes > 0 and names:
-        if not cfg.init_policy:
+        if cfg.init_policy:
+            part, info["labels"] = label_part(cfg, reward_cfg, cfg.init_policy, 0)
+            parts.append(part)
+        elif cfg.dagger_rounds == 0:
             raise ValueError("label_episodes needs init_policy (the student whose states)")
-        d = student_labels(
-            cfg.init_policy,
-            names[0],
-            cfg.label_episodes,
-            cfg.seed + LABEL_SEED_OFFSET,
-            cfg.dispersions,
-        )
-        parts.append(
-            demo_transitions(
-                PhysicalSteps(**label_transitions(d["states"], d["labels"])), cfg, reward_cfg
-            )
-        )
-        info["labels"] = {
-            "teacher": names[0],
-            "student": cfg.init_policy,
-            "episodes": cfg.label_episodes,
-            "labels": len(d["labels"]),
-            "agreement": float(np.mean(d["labels"] == d["proposed"])),
-            "student_success_rate": float(np.mean(d["landed"])),
-            "dispersions": cfg.dispersions or "nominal",
-        }
     if not parts:
         return None, info
     return DemoMemory.fill(*(np.concatenate(col) for col in zip(*parts, strict=True))), info

@@ -107,19 +107,43 @@ class TrainingLoop:
             return "max_minutes"
         if self._updates_done():
             return "max_updates"
+        if cfg.dagger_rounds and self.pretrained >= self._pretrain_total():
+            return "dagger_rounds"
         return ""
+
+    def _pretrain_total(self) -> int:
+        """Pre-training updates of the run: `pretrain_updates` before each DAgger round and
+        after the last one."""
+        return self.cfg.pretrain_updates * (1 + self.cfg.dagger_rounds)
 
     def _updates_done(self) -> bool:
         return 0 < self.cfg.max_updates <= self.agent.updates
 
     def _pretrain(self, logs: RunLogs, bar: Any) -> None:
-        """DQfD pre-training: gradient updates on demonstrations only, before any interaction."""
+        """DQfD pre-training: gradient updates on demonstrations only, before any interaction;
+        with `dagger_rounds`, a round of labels every `pretrain_updates` updates (after an
+        evaluation of the network about to be labelled)."""
         nan = float("nan")
+        cfg = self.cfg
         while (
             self.demo is not None
-            and self.pretrained < self.cfg.pretrain_updates
+            and self.pretrained < self._pretrain_total()
             and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
         ):
+            if self.dagger_round < min(self.pretrained // cfg.pretrain_updates, cfg.dagger_rounds):
+                if cfg.eval_every_s > 0:
+                    self._periodic_eval(logs)
+                info = self.dagger_round_labels()
+                self.c.wall_s = self._now()
+                self.c.last_ckpt_s = self.c.wall_s
+                self.checkpoint()  # a resumed run does not label this round again
+                if not self.quiet:
+                    print(
+                        f"pd-train: DAgger round {info['round']}: {info['labels']} labels "
+                        f"(agreement {info['agreement']:.1%}, student landed "
+                        f"{info['student_success_rate']:.1%}), {len(self.demo)} demonstrations"
+                    )
+                continue
             self.last_info = self.update(pretraining=True)
             self.pretrained += 1
             if self.pretrained % PRETRAIN_LOG_EVERY:
@@ -130,7 +154,7 @@ class TrainingLoop:
             )
             logs.metrics.flush()
             if bar is not None:
-                bar.set_postfix_str(f"pretrain {self.pretrained}/{self.cfg.pretrain_updates}")
+                bar.set_postfix_str(f"pretrain {self.pretrained}/{self._pretrain_total()}")
             self._eval_and_checkpoint(logs, self._now())
 
     def _env_step(self, eps: float, logs: RunLogs, bar: Any) -> None:

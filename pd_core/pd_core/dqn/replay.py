@@ -139,6 +139,23 @@ class DemoMemory(ReplayMemory):
         mem.seal()
         return mem
 
+    def extended(
+        self,
+        obs: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        next_obs: np.ndarray,
+        discounts: np.ndarray,
+    ) -> DemoMemory:
+        """A new sealed memory holding every transition of this one, then these (DAgger's
+        aggregation: demonstrations are added, never replaced)."""
+        n = len(self)
+        old = (self.obs, self.actions, self.rewards, self.next_obs, self.discounts)
+        new = (obs, actions, rewards, next_obs, discounts)
+        return DemoMemory.fill(
+            *(np.concatenate([a[:n], np.asarray(b)]) for a, b in zip(old, new, strict=True))
+        )
+
     def load_state_dict(self, d: dict[str, Any]) -> None:
         self.__init__(int(d["capacity"]), d["obs"].shape[1])  # type: ignore[misc]
         super().load_state_dict(d)

@@ -31,7 +31,7 @@ from pd_core.dqn.checkpoint import (
     write_checkpoint,
 )
 from pd_core.dqn.config import TrainConfig, check_config
-from pd_core.dqn.demo_memory import build_demo_memory
+from pd_core.dqn.demo_memory import build_demo_memory, label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
 from pd_core.dqn.loop import TrainingLoop
 from pd_core.dqn.network import QNetwork
@@ -156,6 +156,7 @@ class Trainer(TrainingLoop):
         self.recent: deque[tuple[float, int]] = deque(maxlen=100)  # (return, landed)
         self.last_info: dict[str, float] = {}
         self.pretrained = 0
+        self.dagger_round = 0  # DAgger rounds labelled so far (`cfg.dagger_rounds`)
         self._scenario_log: CsvLog | None = None
         # the set-up counts towards max_minutes: `run` restarts the clock from wall_s (a resumed
         # run's wall_s comes from its checkpoint instead)
@@ -223,6 +224,7 @@ class Trainer(TrainingLoop):
             "demo_info": json.dumps(self.demo_info),
             "counters": json.dumps(dataclasses.asdict(self.c)),
             "pretrained": self.pretrained,
+            "dagger_round": self.dagger_round,
             "rng": json.dumps(self.rng.bit_generator.state),
             "torch_rng": torch.get_rng_state(),
             "replay_rng": self.replay_gen.get_state() if self.replay_gen is not None else None,
@@ -245,6 +247,7 @@ class Trainer(TrainingLoop):
         c["best_eval"] = tuple(c["best_eval"])
         self.c = Counters(**c)
         self.pretrained = int(state["pretrained"])
+        self.dagger_round = int(state.get("dagger_round", 0))
         self.rng.bit_generator.state = json.loads(state["rng"])
         torch.set_rng_state(state["torch_rng"])
         if self.replay_gen is not None and state.get("replay_rng") is not None:
@@ -281,6 +284,18 @@ class Trainer(TrainingLoop):
                 index_rng=self.rng if self.replay_path == "device-numpy" else None,
             )
         return self._device_update(pretraining)
+
+    def dagger_round_labels(self) -> dict[str, Any]:
+        """The next DAgger round: the current network, saved as `dagger_student.pt`, flies new
+        episodes behind its layer; the teacher's labels on its states join the demonstrations."""
+        self.dagger_round += 1
+        student = self.save_policies("dagger_student")
+        part, info = label_part(self.cfg, self.reward_cfg, str(student), self.dagger_round)
+        assert self.demo is not None
+        self.demo = self.demo.extended(*part)
+        self._device_update = None  # rebuilt on the grown memory at the next update
+        self.demo_info.setdefault("dagger_rounds", []).append(info)
+        return info
 
     def device_metadata(self) -> dict[str, Any]:
         """Where this run trains (run metadata: config.json and the saved policies)."""
