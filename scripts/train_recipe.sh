@@ -11,11 +11,11 @@
 # With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
 # mpc-fuel-reserve, from scratch, under the `standard` dispersions, behind the runtime layer:
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction (30 min);
-#   2. DAgger round 1: stage 1's best.pt flies 1000 episodes, the teacher labels every state
-#      it decides on (pd-train --label-episodes), plus 500 teacher episodes (30 min);
-#   3. DAgger round 2 from stage 2's best.pt (13 min: its best.pt came 9 min in, at the end
-#      of the pre-training; the interaction after it lowered the evaluations). About 73 min in
-#      all. The recipe's policy is stage 3's best.pt (models/pd_dqn_ocp.pt for seed 1).
+#   2. `ocp-dagger` preset from stage 1's best.pt: 500 teacher episodes, then seven DAgger
+#      rounds (the initial network's and six more), each 500 new episodes flown by the current
+#      network and labelled by the teacher, aggregated, 20k pre-training updates after each;
+#      no interaction (about 35 min). About 65 min in all. The recipe's policy is stage 2's
+#      best.pt (models/pd_dqn_ocp.pt for seed 1).
 #
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
@@ -34,8 +34,8 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
-                   teacher's recipe (demonstrations, then two DAgger rounds; about 73 min;
-                   the policy is DIR/stage3/best.pt, default DIR runs/ocp__S)
+                   teacher's recipe (demonstrations, then aggregated DAgger rounds; about
+                   65 min; the policy is DIR/stage2/best.pt, default DIR runs/ocp__S)
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 Each stage uses one torch thread, so two seeds can train side by side on two cores. The
@@ -98,15 +98,12 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
 }
 
 if [[ "$teacher" == ocp ]]; then
-    DAGGER=(--preset ocp --label-episodes 1000 --controller-demo-episodes 500
-        --pretrain-updates 40000 --lr 1e-4 --precision-bonus 10)
     if [[ -z "$stage1" ]]; then
         stage stage1 --preset ocp --max-minutes 30
         stage1="$out/stage1/best.pt"
     fi
-    stage stage2 "${DAGGER[@]}" --init-policy "$stage1" --max-minutes 30
-    stage stage3 "${DAGGER[@]}" --init-policy "$out/stage2/best.pt" --max-minutes 13
-    ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/best.pt"
+    stage stage2 --preset ocp-dagger --init-policy "$stage1"
+    ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage2/best.pt"
     exit 0
 fi
 if [[ -z "$stage1" ]]; then

@@ -58,13 +58,14 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_in_ninety_minut
 ):
     out = tmp_path / "r"
     stages = stage_configs(capsys, "--teacher", "ocp", "--out", str(out))
-    assert len(stages) == 3
+    assert [c["preset"] for c in stages] == ["ocp", "ocp-dagger"]
     for cfg in stages:
-        assert cfg["preset"] == "ocp" and cfg["controller"] == "mpc-fuel-reserve"
-        assert cfg["demos"] == "" and cfg["shield"] is True and cfg["dispersions"] == "standard"
+        assert cfg["controller"] == "mpc-fuel-reserve" and cfg["demos"] == ""
+        assert cfg["shield"] is True and cfg["dispersions"] == "standard"
     assert stages[0]["init_policy"] in ("", None) and stages[0]["label_episodes"] == 0
-    for k, cfg in enumerate(stages[1:], start=1):  # DAgger rounds, each from the last best.pt
-        assert cfg["init_policy"] == f"{out}/stage{k}/best.pt" and cfg["label_episodes"] == 1000
+    # stage 2: aggregated DAgger rounds from stage 1's best.pt, no other starting file
+    assert stages[1]["init_policy"] == f"{out}/stage1/best.pt"
+    assert stages[1]["dagger_rounds"] > 0 and stages[1]["label_episodes"] > 0
     assert sum(c["max_minutes"] for c in stages) <= 90.0
 
 

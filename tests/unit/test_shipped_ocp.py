@@ -14,15 +14,16 @@ MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_ocp"
 def test_every_demonstration_and_label_of_the_lineage_came_from_the_ocp_teacher() -> None:
     meta = json.loads(MODEL.with_suffix(".json").read_text())
     stages = meta["training"]["lineage"]["stages"]
-    assert len(stages) == 3
+    assert len(stages) == 2
     for stage in stages:
         demos = stage["demos"]
         assert "file" not in demos  # no open-loop file, no ZEM/ZEV episode
         assert {c["name"] for c in demos["controller"]} == {"mpc-fuel-reserve"}
         assert all(c["behind_layer"] for c in demos["controller"])
-        if "labels" in demos:
-            assert demos["labels"]["teacher"] == "mpc-fuel-reserve"
-    assert "labels" not in stages[0]["demos"] and "labels" in stages[2]["demos"]
+        for labels in [demos.get("labels", {}), *demos.get("dagger_rounds", [])]:
+            assert labels.get("teacher", "mpc-fuel-reserve") == "mpc-fuel-reserve"
+    assert "labels" not in stages[0]["demos"] and "labels" in stages[1]["demos"]
+    assert len(stages[1]["demos"]["dagger_rounds"]) >= 1  # aggregated rounds after the first
     assert "init-policy" not in stages[0]["command"]  # from scratch
 
 
