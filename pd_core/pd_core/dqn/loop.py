@@ -97,7 +97,11 @@ class TrainingLoop:
     def _progress_bar(self) -> Any:
         if not self.cfg.progress or self.quiet:
             return None
-        return tqdm(total=self.cfg.episodes, initial=self.c.episodes, unit="ep", smoothing=0.05)
+        if self.cfg.dagger_rounds:  # no interaction: the bar counts the pre-training updates
+            total, done, unit = self._pretrain_total(), self.pretrained, "upd"
+        else:
+            total, done, unit = self.cfg.episodes, self.c.episodes, "ep"
+        return tqdm(total=total, initial=done, unit=unit, smoothing=0.05)
 
     def _stop_reason(self) -> str:
         cfg = self.cfg
@@ -138,7 +142,7 @@ class TrainingLoop:
                 self.c.last_ckpt_s = self.c.wall_s
                 self.checkpoint()  # a resumed run does not label this round again
                 if not self.quiet:
-                    print(
+                    (bar.write if bar is not None else print)(
                         f"pd-train: DAgger round {info['round']}: {info['labels']} labels "
                         f"(agreement {info['agreement']:.1%}, student landed "
                         f"{info['student_success_rate']:.1%}), {len(self.demo)} demonstrations"
@@ -154,7 +158,11 @@ class TrainingLoop:
             )
             logs.metrics.flush()
             if bar is not None:
-                bar.set_postfix_str(f"pretrain {self.pretrained}/{self._pretrain_total()}")
+                if cfg.dagger_rounds:
+                    bar.update(PRETRAIN_LOG_EVERY)
+                    bar.set_postfix_str(f"DAgger rounds {self.dagger_round}/{cfg.dagger_rounds}")
+                else:
+                    bar.set_postfix_str(f"pretrain {self.pretrained}/{self._pretrain_total()}")
             self._eval_and_checkpoint(logs, self._now())
 
     def _env_step(self, eps: float, logs: RunLogs, bar: Any) -> None:
