@@ -139,21 +139,14 @@ class DemoMemory(ReplayMemory):
         mem.seal()
         return mem
 
-    def extended(
-        self,
-        obs: np.ndarray,
-        actions: np.ndarray,
-        rewards: np.ndarray,
-        next_obs: np.ndarray,
-        discounts: np.ndarray,
-    ) -> DemoMemory:
-        """A new sealed memory holding every transition of this one, then these (DAgger's
-        aggregation: demonstrations are added, never replaced)."""
+    def extended(self, *columns: np.ndarray) -> DemoMemory:
+        """A new sealed memory holding every transition of this one, then the transitions of
+        `columns` (obs, actions, rewards, next_obs, discounts; DAgger's aggregation:
+        demonstrations are added, never replaced)."""
         n = len(self)
         old = (self.obs, self.actions, self.rewards, self.next_obs, self.discounts)
-        new = (obs, actions, rewards, next_obs, discounts)
         return DemoMemory.fill(
-            *(np.concatenate([a[:n], np.asarray(b)]) for a, b in zip(old, new, strict=True))
+            *(np.concatenate([a[:n], np.asarray(c)]) for a, c in zip(old, columns, strict=True))
         )
 
     def load_state_dict(self, d: dict[str, Any]) -> None:
