@@ -17,6 +17,15 @@
 #      no interaction (about 35 min). About 65 min in all. The recipe's policy is stage 2's
 #      best.pt (models/pd_dqn_ocp.pt for seed 1).
 #
+# The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
+# the demonstrations come from (--demonstrator, with --teacher ocp):
+#   mpc-fuel-reserve  the recipe above (default);
+#   zemzev-vernier    the same two stages, ZEM/ZEV-vernier flying the demonstrations and labelling;
+#   open-loop         the paper's 33 open-loop OCP trajectories (data/demos_7x7x3.npz): one `ocp`
+#                     stage of 65 min (open-loop plans cannot label the student's states);
+#   none              no demonstrations: one `ocp` stage of 65 min, interaction only.
+# Their run directories default to runs/ablation_<demonstrator>__S.
+#
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
 # recipe goes on where it stopped.
@@ -25,7 +34,7 @@ set -euo pipefail
 usage() {
     cat <<'EOF'
 usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
-                              [--teacher zemzev-vernier|ocp] [--dry-run] [-h]
+                              [--teacher zemzev-vernier|ocp] [--demonstrator D] [--dry-run] [-h]
 
   --seed S         training seed of every stage (default 1)
   --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
@@ -36,6 +45,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
                    teacher's recipe (demonstrations, then aggregated DAgger rounds; about
                    65 min; the policy is DIR/stage2/best.pt, default DIR runs/ocp__S)
+  --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
+                   zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
+                   recipe and budget (default DIR runs/ablation_D__S)
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 Each stage uses one torch thread, so two seeds can train side by side on two cores. The
@@ -49,6 +61,7 @@ out=""
 stage1=""
 dry=0
 teacher=zemzev-vernier
+demonstrator=mpc-fuel-reserve
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
     case "$1" in
@@ -58,6 +71,7 @@ while [[ $# -gt 0 ]]; do
         --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
         --paper-inputs) near_pad=(); shift ;;
         --teacher) teacher="${2:?--teacher needs zemzev-vernier or ocp}"; shift 2 ;;
+        --demonstrator) demonstrator="${2:?--demonstrator needs a value}"; shift 2 ;;
         --dry-run) dry=1; shift ;;
         *) echo "train_recipe.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
@@ -65,7 +79,14 @@ done
 [[ "$seed" =~ ^[0-9]+$ ]] || { echo "train_recipe.sh: --seed must be a non-negative integer, got '$seed'" >&2; exit 2; }
 [[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
 [[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
-if [[ "$teacher" == ocp ]]; then
+case "$demonstrator" in
+    mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
+    *) echo "train_recipe.sh: --demonstrator must be mpc-fuel-reserve, zemzev-vernier, open-loop or none, got '$demonstrator'" >&2; exit 2 ;;
+esac
+[[ "$demonstrator" == mpc-fuel-reserve || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
+if [[ "$teacher" == ocp && "$demonstrator" != mpc-fuel-reserve ]]; then
+    out="${out:-runs/ablation_${demonstrator}__$seed}"
+elif [[ "$teacher" == ocp ]]; then
     out="${out:-runs/ocp__$seed}"
 else
     out="${out:-runs/recipe__$seed}"
@@ -80,7 +101,8 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
     shift
     local cmd=(pd-train "$@" --seed "$seed" --torch-threads 1 --run-dir "$out/$name")
     if ((dry)); then
-        echo "${cmd[*]}"
+        printf '%q ' "${cmd[@]}"  # quoted, so an empty value (--controller '') survives
+        echo
         return
     fi
     if [[ -f "$out/$name/final.pt" ]]; then
@@ -97,12 +119,25 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
     echo "== $name: $(((SECONDS - t0) / 60)) min $(((SECONDS - t0) % 60)) s"
 }
 
+if [[ "$teacher" == ocp && ( "$demonstrator" == open-loop || "$demonstrator" == none ) ]]; then
+    # no closed-loop teacher to label with: the whole budget in one stage
+    if [[ "$demonstrator" == open-loop ]]; then
+        arm=(--controller "" --controller-demo-episodes 0 --demos data/demos_7x7x3.npz)
+    else
+        arm=(--controller "" --controller-demo-episodes 0 --batch-demo 0 --pretrain-updates 0 --margin 0)
+    fi
+    stage stage1 --preset ocp "${arm[@]}" --max-minutes 65
+    ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage1/best.pt"
+    exit 0
+fi
 if [[ "$teacher" == ocp ]]; then
+    arm=()
+    [[ "$demonstrator" == zemzev-vernier ]] && arm=(--controller zemzev-vernier)
     if [[ -z "$stage1" ]]; then
-        stage stage1 --preset ocp --max-minutes 30
+        stage stage1 --preset ocp "${arm[@]}" --max-minutes 30
         stage1="$out/stage1/best.pt"
     fi
-    stage stage2 --preset ocp-dagger --init-policy "$stage1"
+    stage stage2 --preset ocp-dagger "${arm[@]}" --init-policy "$stage1"
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage2/best.pt"
     exit 0
 fi

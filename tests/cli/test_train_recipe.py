@@ -69,6 +69,37 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_in_ninety_minut
     assert sum(c["max_minutes"] for c in stages) <= 90.0
 
 
+def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path, capsys):
+    base = stage_configs(capsys, "--teacher", "ocp", "--out", str(tmp_path / "ocp"))
+    zv = stage_configs(
+        capsys, "--teacher", "ocp", "--demonstrator", "zemzev-vernier", "--out", str(tmp_path / "z")
+    )
+    # ZEM/ZEV-vernier: the same two stages, it flies the demonstrations and labels
+    assert [c["controller"] for c in zv] == ["zemzev-vernier", "zemzev-vernier"]
+    ignore = {"controller", "run_dir", "init_policy"}
+    for a, b in zip(base, zv, strict=True):
+        assert {k: v for k, v in a.items() if k not in ignore} == {
+            k: v for k, v in b.items() if k not in ignore
+        }
+    budget = sum(c["max_minutes"] for c in base)
+    (paper,) = stage_configs(capsys, "--teacher", "ocp", "--demonstrator", "open-loop")
+    (none,) = stage_configs(capsys, "--teacher", "ocp", "--demonstrator", "none")
+    assert paper["run_dir"] == "runs/ablation_open-loop__1/stage1"
+    # the paper's 33 open-loop trajectories, no closed-loop teacher anywhere
+    assert paper["demos"] == "data/demos_7x7x3.npz" and paper["batch_demo"] > 0
+    assert paper["controller"] == "" and paper["controller_demo_episodes"] == 0
+    assert paper["pretrain_updates"] == base[0]["pretrain_updates"]
+    # no demonstrations at all: no demonstration batch, no pre-training, no margin loss
+    assert none["batch_demo"] == 0 and none["pretrain_updates"] == 0 and none["margin"] == 0
+    assert none["demos"] == "" and none["controller"] == ""
+    for cfg in (paper, none):
+        assert cfg["preset"] == "ocp" and cfg["init_policy"] in ("", None)
+        assert cfg["shield"] is True and cfg["dispersions"] == "standard"
+        # one stage holds the wall time the two-stage recipe takes (65 min measured), inside
+        # the sum of its two caps
+        assert 60.0 <= cfg["max_minutes"] <= budget
+
+
 def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
     start = tmp_path / "start.pt"
     start.write_bytes(b"")
@@ -114,6 +145,8 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--bogus"], "unknown argument '--bogus'"),
         (["--stage1", "/nonexistent.pt"], "--stage1 file not found"),
         (["--teacher", "zemzev"], "--teacher must be zemzev-vernier or ocp"),
+        (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel-reserve"),
+        (["--demonstrator", "none"], "--demonstrator needs --teacher ocp"),
     ],
 )
 def test_bad_flag_is_one_line(args, named):
