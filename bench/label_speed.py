@@ -7,10 +7,11 @@ worker and on every core, side by side in one run, with the ratios (issue 32).
    the layer itself (one demonstration per step).
 
 Both under the `standard` dispersions, the same episodes on 1 and on N workers (spawned
-processes; each worker's start-up, about 3 s, is counted).
+processes; each worker's start-up, about 3 s, is counted), and with --address as Ray tasks
+(`pd-train --address`; local: a local instance, its start counted in the first row).
 
     python bench/label_speed.py [--policy models/pd_dqn_ocp.pt] [--teacher mpc-fuel-reserve]
-                                [--episodes 40] [--workers N]
+                                [--episodes 40] [--workers N] [--address local|auto|host:port]
 """
 
 from __future__ import annotations
@@ -37,21 +38,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=40)
     ap.add_argument("--dispersions", default="standard")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--address", default="", help="also on Ray: local, auto or host:port")
     a = ap.parse_args(argv)
     print(f"teacher {a.teacher}, {a.episodes} episodes under {a.dispersions!r}, seed 0")
     print(f"{'what':<28} {'workers':>7} {'labels':>8} {'s':>7} {'labels/s':>9} {'x 1':>5}")
     for what in ("DAgger labels (shadow)", "teacher-flown demos"):
         base = None
-        for w in sorted({1, a.workers}):
+        for w in [*sorted({1, a.workers}), *(["ray"] if a.address else [])]:
+            where = {"address": a.address} if w == "ray" else {"workers": w}
             t0 = time.perf_counter()
             if what.startswith("DAgger"):
                 n = len(
-                    student_labels(a.policy, a.teacher, a.episodes, 0, a.dispersions, w)["labels"]
-                )
+                    student_labels(
+                        a.policy, a.teacher, a.episodes, 0, a.dispersions, **where
+                    )["labels"]
+                )  # fmt: skip
             else:
                 d = controller_demonstrations(
-                    a.teacher, a.episodes, 0, dispersions=a.dispersions, workers=w,
-                    behind_layer=True,
+                    a.teacher, a.episodes, 0, dispersions=a.dispersions, behind_layer=True,
+                    **where,
                 )  # fmt: skip
                 n = len(d["actions"])
             dt = time.perf_counter() - t0

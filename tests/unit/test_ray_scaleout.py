@@ -1,5 +1,6 @@
 """Ray on a local instance: sharded campaigns equal unsharded ones, a killed worker's shard is
-retried, a 2-trial sweep writes its run folders and summary, a bad --address fails clearly.
+retried, DAgger labels and teacher demonstrations on Ray equal the process pool's, a 2-trial
+sweep writes its run folders and summary, a bad --address fails clearly.
 
 One local Ray instance serves the whole module (starting one costs about 10 s here).
 """
@@ -16,6 +17,9 @@ ray = pytest.importorskip("ray")
 
 from pd_core.cli import evaluate as pd_eval  # noqa: E402
 from pd_core.cli import sweep as pd_sweep  # noqa: E402
+from pd_core.cli import train as pd_train  # noqa: E402
+from pd_core.demonstrations.dagger import student_labels  # noqa: E402
+from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
 from pd_core.dispersions import SCENARIOS  # noqa: E402
 from pd_core.experiments.campaign import run_campaign  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
@@ -24,6 +28,7 @@ from pd_core.experiments.ray_session import RayUnavailable, connect  # noqa: E40
 from pd_core.teachers.zemzev import ZemZevController  # noqa: E402
 
 MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt"
+OCP_MODEL = MODEL.with_name("pd_dqn_ocp.pt")
 FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
 
 
@@ -43,6 +48,10 @@ def test_unreachable_address_fails_fast_in_one_line(capsys):
     assert rc == 2 and len(err.splitlines()) == 1
     assert err.startswith("pd-eval: no Ray cluster at 127.0.0.1:1") and "ray start" in err
     assert pd_sweep.main(["--seeds", "1", "--address", "ray://127.0.0.1:1"]) == 2
+    capsys.readouterr()
+    assert pd_train.main(["--preset", "ocp", "--address", "127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("pd-train: no Ray cluster at 127.0.0.1:1")
     assert not ray.is_initialized()
 
 
@@ -65,6 +74,22 @@ def test_sharded_campaign_equals_unsharded_exactly(local_ray):
             _assert_same(sharded[d.name][a], here[d.name][a])
     # the nominal cell is the plain evaluation, episode i on seed 40 + i
     _assert_same(here["nominal"]["zemzev"], rollout(ZemZevController(), 96, 40))
+
+
+def test_labels_and_teacher_demonstrations_on_ray_equal_the_process_pool(local_ray):
+    # the same chunks (3 episodes each) as Ray tasks: the same labels, episode for episode
+    kw = {"dispersions": "standard", "chunk": 3}
+    here = student_labels(str(OCP_MODEL), "zemzev-vernier", 7, 11, workers=1, **kw)
+    on_ray = student_labels(str(OCP_MODEL), "zemzev-vernier", 7, 11, address="local", **kw)
+    assert len(here["landed"]) == 7 and len(here["labels"]) > 7 * 50
+    for k in here:
+        np.testing.assert_array_equal(on_ray[k], here[k], err_msg=k)
+    here = controller_demonstrations("zemzev-vernier", 7, 11, workers=1, behind_layer=True, **kw)
+    on_ray = controller_demonstrations(
+        "zemzev-vernier", 7, 11, address="local", behind_layer=True, **kw
+    )
+    for k in here:
+        np.testing.assert_array_equal(on_ray[k], here[k], err_msg=k)
 
 
 def test_killed_worker_shard_is_retried_not_lost_or_doubled(local_ray, tmp_path):

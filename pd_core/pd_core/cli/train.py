@@ -6,6 +6,7 @@ Examples:
     pd-train --preset best --seed 1 --max-minutes 55
     pd-train --resume runs/best__1__20260101-120000 --max-minutes 80
     pd-train --resume runs/best__1__20260101-120000 --device cpu  # a GPU run, on a CPU
+    pd-train --preset ocp --address auto  # the teacher's episodes and labels on a Ray cluster
 """
 
 from __future__ import annotations
@@ -37,6 +38,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def join_ray(address: str) -> str | None:
+    """Join the Ray cluster the teacher's episodes and labels fly on (`--address`; "": none)
+    before any work starts: None, or the one-line reason it cannot."""
+    if not address:
+        return None
+    from pd_core.experiments.ray_session import RayUnavailable, connect  # Ray: only if asked
+
+    try:
+        connect(None if address == "local" else address)
+    except RayUnavailable as exc:
+        return str(exc)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
@@ -53,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"pd-train: cannot resume from {args.resume}: {exc}", file=sys.stderr)
             return 2
+        if (reason := join_ray(trainer.cfg.address)) is not None:
+            print(f"pd-train: {reason}", file=sys.stderr)
+            return 2
     else:
         cfg = from_args(args)
         try:
@@ -63,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.print_config:
             print(json.dumps(cfg.to_dict(), indent=2))
             return 0
+        if (reason := join_ray(cfg.address)) is not None:
+            print(f"pd-train: {reason}", file=sys.stderr)
+            return 2
         try:
             trainer = Trainer(cfg)
         except (FileNotFoundError, ValueError) as exc:

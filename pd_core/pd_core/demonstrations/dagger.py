@@ -9,7 +9,8 @@ disturbance, the nominal engine): the state, the teacher's action and the state 
 leads to, so the DQfD memory's TD and margin losses take it like any other demonstration.
 
 Chunks of `LABEL_CHUNK_EPISODES` episodes (chunk k: env seeds seed + k * chunk ...) run on a
-spawned process pool (`map_chunks`), so the labels do not depend on the number of workers.
+spawned process pool, or as Ray tasks given an address (`map_chunks`), so the labels do not
+depend on the number of workers or where they run.
 """
 
 from __future__ import annotations
@@ -73,11 +74,13 @@ def student_labels(
     dispersions: Any = "",
     workers: int | None = None,
     chunk: int = LABEL_CHUNK_EPISODES,
+    address: str = "",
 ) -> dict[str, np.ndarray]:
     """The teacher's labels on the states the student at `policy_path` decides on over
     episodes 0..n_episodes-1 (env seed seed + i, disturbances on, under `dispersions`):
     states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, landed
-    (n_episodes,) the student's outcomes. `workers` None = every core."""
+    (n_episodes,) the student's outcomes. `workers` None = every core; `address`: on Ray
+    there instead (`map_chunks`)."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     make_controller(teacher)  # an unknown name fails here, in the caller's process
@@ -85,7 +88,7 @@ def student_labels(
         (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions)
         for k in range(0, n_episodes, chunk)
     ]
-    parts = map_chunks(_label_chunk, tasks, workers)
+    parts = map_chunks(_label_chunk, tasks, workers, address)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 

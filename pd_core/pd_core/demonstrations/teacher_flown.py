@@ -6,7 +6,9 @@ dispersions), bare or behind the runtime layer, as 1-step transitions for
 
 `map_chunks` spreads seeded chunks of fixed size over a process pool: chunk k always holds the same
 episodes (seeds seed + k * chunk ...) flown by a fresh teacher, so the result does not depend on
-the number of workers. Workers are spawned, not forked (the caller may hold torch threads).
+the number of workers. Workers are spawned, not forked (the caller may hold torch threads). Given
+a Ray `address`, the chunks run as Ray tasks instead (`pd_core.experiments.ray_session`): the
+same chunks, so the same result.
 """
 
 from __future__ import annotations
@@ -28,8 +30,15 @@ from pd_core.teachers.registry import make_controller
 DEMO_CHUNK_EPISODES = 25  # ours: episodes per pool task (small enough to balance 2 workers)
 
 
-def map_chunks(fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None) -> list[Any]:
-    """fn(*task) for every task, in order; in a spawned process pool unless workers <= 1."""
+def map_chunks(
+    fn: Callable[..., Any], tasks: Sequence[tuple], workers: int | None, address: str = ""
+) -> list[Any]:
+    """fn(*task) for every task, in order: as Ray tasks when `address` is given (auto,
+    host:port, ray://host:port, or local), else in a spawned process pool unless workers <= 1."""
+    if address:
+        from pd_core.experiments.ray_session import map_tasks  # imports Ray: only with an address
+
+        return map_tasks(fn, tasks, address)
     n = (os.cpu_count() or 1) if workers is None else workers
     if n <= 1 or len(tasks) <= 1:
         return [fn(*t) for t in tasks]
@@ -97,6 +106,7 @@ def controller_demonstrations(
     chunk: int = DEMO_CHUNK_EPISODES,
     episode_seeds: np.ndarray | None = None,
     behind_layer: bool = False,
+    address: str = "",
 ) -> dict[str, np.ndarray]:
     """Physical 1-step transitions of a controller of `pd_core.teachers.zemzev` (the MPC teacher
     `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
@@ -105,7 +115,8 @@ def controller_demonstrations(
     `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
     `pd_core.experiments.evaluate.rollout`; `workers` None = every core. `behind_layer`: the
     controller flies behind the default runtime layer (`pd_core.runtime.Runtime`), as a
-    student trained on the demonstrations will fly: the actions are the ones flown."""
+    student trained on the demonstrations will fly: the actions are the ones flown. `address`:
+    the chunks run on Ray there instead (`map_chunks`)."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     make_controller(controller)  # an unknown name fails here, in the caller's process
@@ -123,7 +134,7 @@ def controller_demonstrations(
         )
         for k in range(0, n_episodes, chunk)
     ]
-    parts = map_chunks(_fly_chunk, tasks, workers)
+    parts = map_chunks(_fly_chunk, tasks, workers, address)
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     out["success_rate"] = np.array(float(np.mean(out["landed"])))
     return out

@@ -153,6 +153,9 @@ class TrainConfig:
     """run folder (default runs/<preset>__<seed>__<time>)"""
     resume: str = ""
     """run folder or checkpoint.pt to resume: networks, optimiser, replay memories, schedules"""
+    address: str = ""
+    """Ray cluster that flies the teacher's demonstrations and DAgger labels: auto, host:port,
+    ray://host:port, or local (a local Ray instance); "": a process pool on this machine"""
     torch_threads: int = 1
     """torch CPU threads (1 keeps runs repeatable and leaves the other core free)"""
     device: str = "auto"

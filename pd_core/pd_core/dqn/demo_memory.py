@@ -84,11 +84,13 @@ def controller_steps(
     initial_states: np.ndarray | None = None,
     episode_seeds: np.ndarray | None = None,
     behind_layer: bool = False,
+    address: str = "",
 ) -> tuple[PhysicalSteps, float]:
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
     env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
     those that landed; its success rate. The MPC teacher flies on every core. `behind_layer`:
-    the controller flies behind the runtime layer (a student trained with `shield` flies so)."""
+    the controller flies behind the runtime layer (a student trained with `shield` flies so).
+    `address`: the episodes fly as Ray tasks there instead (any controller)."""
     workers = None if name.startswith("mpc") else 1
     d = controller_demonstrations(
         name,
@@ -99,6 +101,7 @@ def controller_steps(
         workers=workers,
         episode_seeds=episode_seeds,
         behind_layer=behind_layer,
+        address=address,
     )
     keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
     steps = PhysicalSteps(
@@ -162,6 +165,7 @@ def recovery_steps(
     landed_only: bool = False,
     failed_share: float = 0.0,
     shield: bool = False,
+    address: str = "",
 ) -> tuple[PhysicalSteps, float, float]:
     """Teacher `name` flying on from states the student visits (DAgger-style demonstrations:
     the student's states, the teacher's actions, and the teacher's own transitions so the TD
@@ -171,7 +175,7 @@ def recovery_steps(
         policy_path, n_episodes, seed, dispersions, failed_share, shield
     )
     steps, teacher = controller_steps(
-        name, n_episodes, seed, dispersions, landed_only, starts, seeds, shield
+        name, n_episodes, seed, dispersions, landed_only, starts, seeds, shield, address
     )
     return steps, teacher, student
 
@@ -201,6 +205,7 @@ def label_part(
         cfg.label_episodes,
         cfg.seed + LABEL_SEED_OFFSET + round_index * cfg.label_episodes,
         cfg.dispersions,
+        address=cfg.address,
     )
     steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
     return demo_transitions(steps, cfg, reward_cfg), {
@@ -234,7 +239,13 @@ def build_demo_memory(
             )
             seed = cfg.seed + CONTROLLER_SEED_OFFSET + k * 1_000_000
             steps, success = controller_steps(
-                name, n, seed, cfg.dispersions, cfg.demo_landed_only, behind_layer=cfg.shield
+                name,
+                n,
+                seed,
+                cfg.dispersions,
+                cfg.demo_landed_only,
+                behind_layer=cfg.shield,
+                address=cfg.address,
             )
             parts.append(demo_transitions(steps, cfg, reward_cfg))
             info["controller"].append(
@@ -261,6 +272,7 @@ def build_demo_memory(
             cfg.demo_landed_only,
             cfg.recovery_failed_share,
             cfg.shield,
+            cfg.address,
         )
         parts.append(demo_transitions(steps, cfg, reward_cfg))
         info["recovery"] = {

@@ -19,9 +19,7 @@ from tqdm import tqdm
 from pd_core.dispersions import Dispersions
 from pd_core.experiments.campaign import AgentSpec, Shard, fly_shard, load_actor, merge, plan
 from pd_core.experiments.evaluate import CHUNK_EPISODES, Actor, Rollouts
-from pd_core.experiments.ray_session import cluster_cpus, connect
-
-MAX_RETRIES = 3  # attempts after a worker dies (Ray's own retry of system failures)
+from pd_core.experiments.ray_session import MAX_RETRIES, cluster_cpus, connect
 
 
 @functools.lru_cache(maxsize=8)

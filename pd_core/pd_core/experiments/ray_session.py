@@ -1,7 +1,7 @@
 """Joining Ray: a local instance sized to this machine by default, or an existing cluster.
 
-Only the Ray code paths (`pd-sweep`, `pd-eval --ray`) import this module; nothing else in
-pd_core needs Ray.
+Only the Ray code paths (`pd-sweep`, `pd-eval --ray`, `pd-train --address`) import this module;
+nothing else in pd_core needs Ray.
 """
 
 from __future__ import annotations
@@ -9,12 +9,14 @@ from __future__ import annotations
 import logging
 import os
 import socket
+from collections.abc import Callable, Sequence
 from typing import Any
 from urllib.parse import urlsplit
 
 import ray  # optional heavy dependency: imported only by the Ray code paths
 
 CONNECT_TIMEOUT_S = 3.0
+MAX_RETRIES = 3  # attempts after a worker dies (Ray's own retry of system failures)
 
 
 class RayUnavailable(RuntimeError):
@@ -82,3 +84,14 @@ def _check_reachable(address: str) -> None:
 def cluster_cpus() -> int:
     """CPUs of the Ray session (after `connect`)."""
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def map_tasks(
+    fn: Callable[..., Any], tasks: Sequence[tuple], address: str, max_retries: int = MAX_RETRIES
+) -> list[Any]:
+    """fn(*task) for every task as one Ray task each (one CPU), results in task order, after
+    `connect(address)` ("local": a local instance). A task whose worker dies is retried by Ray.
+    RayUnavailable if Ray cannot be started or joined."""
+    connect(None if address == "local" else address)
+    remote = ray.remote(num_cpus=1, max_retries=max_retries)(fn)
+    return ray.get([remote.remote(*t) for t in tasks])
