@@ -46,7 +46,7 @@ def join_ray(address: str) -> str | None:
     from pd_core.experiments.ray_session import RayUnavailable, connect  # Ray: only if asked
 
     try:
-        connect(None if address == "local" else address)
+        connect(address)
     except RayUnavailable as exc:
         return str(exc)
     return None

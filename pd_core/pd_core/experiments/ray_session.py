@@ -92,6 +92,6 @@ def map_tasks(
     """fn(*task) for every task as one Ray task each (one CPU), results in task order, after
     `connect(address)` ("local": a local instance). A task whose worker dies is retried by Ray.
     RayUnavailable if Ray cannot be started or joined."""
-    connect(None if address == "local" else address)
+    connect(address)
     remote = ray.remote(num_cpus=1, max_retries=max_retries)(fn)
     return ray.get([remote.remote(*t) for t in tasks])
