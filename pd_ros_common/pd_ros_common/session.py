@@ -12,6 +12,7 @@ from collections.abc import Callable
 from types import TracebackType
 
 import rclpy
+from rclpy.client import Client
 from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -34,6 +35,26 @@ def spin_until(
             check()
         executor.spin_once(timeout_sec=step_s)
     return bool(predicate())
+
+
+# A service's response goes out on a writer that must have matched the client's response reader;
+# the client only sees the server's request reader (`service_is_ready`). Until the server has
+# discovered the client too, Fast DDS drops the response after a short wait (rclpy warns "failed
+# to send response (timeout)") and the request is never answered: a fresh client on a busy
+# machine lost one so (CI, test_ocp_node). Spinning this long after `service_is_ready` lets
+# discovery finish both ways.
+SERVICE_SETTLE_S = 1.0
+
+
+def wait_for_server(
+    executor: Executor, client: Client, timeout_s: float, settle_s: float = SERVICE_SETTLE_S
+) -> bool:
+    """True once `client` sees its server (within `timeout_s`), after `settle_s` more of
+    spinning so the server has matched the client's response reader as well."""
+    if not spin_until(executor, client.service_is_ready, timeout_s):
+        return False
+    spin_until(executor, lambda: False, settle_s)
+    return True
 
 
 class RosSession:

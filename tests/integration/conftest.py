@@ -21,7 +21,9 @@ Fixtures
                  and destroys it after the test;
 ``spin_until``   ``spin_until(predicate, timeout_sec=10.0) -> bool`` spins the executor with
                  ``spin_once`` steps until ``predicate()`` holds or the deadline passes
-                 (never a bare ``spin``).
+                 (never a bare ``spin``);
+``service_ready`` ``service_ready(client, timeout_s=20.0) -> bool``: the server is discovered
+                 and has had time to discover the client, so a first request is answered.
 """
 
 from __future__ import annotations
@@ -99,3 +101,14 @@ def spin_until(ros_executor: SingleThreadedExecutor) -> Callable[..., bool]:
         return session.spin_until(ros_executor, predicate, timeout_sec, step_s=step_sec)
 
     return spin
+
+
+@pytest.fixture
+def service_ready(ros_executor: SingleThreadedExecutor) -> Callable[..., bool]:
+    """``service_ready(client, timeout_s)``: the server is discovered and has had time to
+    discover the client (`session.wait_for_server`), so a first request is answered."""
+
+    def ready(client, timeout_s: float = 20.0) -> bool:
+        return session.wait_for_server(ros_executor, client, timeout_s)
+
+    return ready

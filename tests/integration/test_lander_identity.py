@@ -79,7 +79,9 @@ def test_diagnostics_report_takes_the_worst_rule():
 @pytest.mark.integration
 @pytest.mark.slow
 @pytest.mark.timeout(400)
-def test_two_stacks_without_namespaces_fly_only_their_own_commands(tmp_path, make_node, spin_until):
+def test_two_stacks_without_namespaces_fly_only_their_own_commands(
+    tmp_path, make_node, spin_until, service_ready
+):
     procs = ProcessSet(tmp_path)
     probe = make_node("identity_probe")
     states: list[LanderState] = []
@@ -131,7 +133,7 @@ def test_two_stacks_without_namespaces_fly_only_their_own_commands(tmp_path, mak
 
         # A reset naming no lander is ambiguous now: refused (by whichever answers).
         reset = clients.reset_client(probe)
-        assert spin_until(reset.service_is_ready, 30.0)
+        assert service_ready(reset, 30.0)
         future = reset.call_async(reset_request(None, seed=5))
         assert spin_until(future.done, 30.0), procs.logs()
         assert not future.result().success and "ambiguous" in future.result().message

@@ -72,7 +72,7 @@ def test_runtime_settings_change_the_layer_the_policy_flies(tmp_path):
         procs.stop_all()
 
 
-def test_integers_for_doubles_are_stored_as_doubles(tmp_path, make_node, spin_until):
+def test_integers_for_doubles_are_stored_as_doubles(tmp_path, make_node, spin_until, service_ready):
     """`-p rate_hz:=10` reads back from the parameter server as the double 10.0 (issue 33; it
     kept the integer type), an integer parameter stays an integer."""
     from rcl_interfaces.msg import ParameterType
@@ -85,7 +85,7 @@ def test_integers_for_doubles_are_stored_as_doubles(tmp_path, make_node, spin_un
         )
         assert sim.wait_log("real time at 10 Hz", START_S), sim.log()
         get = make_node("param_probe").create_client(GetParameters, "/pd_sim_node/get_parameters")
-        assert spin_until(get.service_is_ready, 30.0)
+        assert service_ready(get, 30.0)
         future = get.call_async(GetParameters.Request(names=["rate_hz", "max_time_s", "seed"]))
         assert spin_until(future.done, 30.0)
         rate, max_time, seed = future.result().values

@@ -39,10 +39,10 @@ def ocp_node(tmp_path_factory):
 
 
 @pytest.fixture
-def client(ocp_node, make_node, spin_until):
+def client(ocp_node, make_node, spin_until, service_ready):
     node = make_node("ocp_probe")
     cli = node.create_client(ComputeTrajectory, "/ocp/compute_trajectory")
-    assert spin_until(cli.service_is_ready, 20.0), "no /ocp/compute_trajectory"
+    assert service_ready(cli, 20.0), "no /ocp/compute_trajectory"
 
     def call(state, timeout_s: float = 60.0, **fields) -> ComputeTrajectory.Response:
         req = ComputeTrajectory.Request(mass=float(state[6]), **fields)
@@ -118,12 +118,14 @@ def test_bad_requests_get_success_false(client, state, fields, says):
     assert says in resp.message, resp.message
 
 
-def test_timeout_reported_and_parameters_answered_while_solving(client, ocp_node, spin_until):
+def test_timeout_reported_and_parameters_answered_while_solving(
+    client, ocp_node, spin_until, service_ready
+):
     node = client.node
     params = node.create_client(GetParameters, "/pd_ocp_node/get_parameters")
-    assert spin_until(params.service_is_ready, 10.0)
+    assert service_ready(params, 10.0)
     cli = node.create_client(ComputeTrajectory, "/ocp/compute_trajectory")
-    assert spin_until(cli.service_is_ready, 10.0)
+    assert service_ready(cli, 10.0)
     # SLSQP over 3 * 400 + 1 variables: its dense subproblems take far longer than the 4 s limit
     # on any machine, so the timeout path is what is tested, whatever the solver's speed.
     req = ComputeTrajectory.Request(
@@ -191,13 +193,13 @@ def test_burst_of_50_from_one_client_of_pd_ros_common_answered_in_full(client, s
     node.destroy_client(cli)
 
 
-def test_integer_set_for_a_double_is_stored_as_a_double(client, spin_until):
+def test_integer_set_for_a_double_is_stored_as_a_double(client, spin_until, service_ready):
     from rcl_interfaces.msg import ParameterType
 
     node = client.node
     setp = node.create_client(SetParameters, "/pd_ocp_node/set_parameters")
     getp = node.create_client(GetParameters, "/pd_ocp_node/get_parameters")
-    assert spin_until(lambda: setp.service_is_ready() and getp.service_is_ready(), 10.0)
+    assert service_ready(setp, 10.0) and service_ready(getp, 10.0)
     msg = Parameter("timeout_s", value=45).to_parameter_msg()
     fut = setp.call_async(SetParameters.Request(parameters=[msg]))
     assert spin_until(fut.done, 10.0) and fut.result().results[0].successful
@@ -211,10 +213,10 @@ def test_integer_set_for_a_double_is_stored_as_a_double(client, spin_until):
     assert spin_until(fut.done, 10.0) and fut.result().results[0].successful
 
 
-def test_parameters_checked_at_run_time_like_at_start_up(client, spin_until):
+def test_parameters_checked_at_run_time_like_at_start_up(client, spin_until, service_ready):
     node = client.node
     setp = node.create_client(SetParameters, "/pd_ocp_node/set_parameters")
-    assert spin_until(setp.service_is_ready, 10.0)
+    assert service_ready(setp, 10.0)
 
     def set_(name: str, value) -> tuple[bool, str]:
         msg = Parameter(name, value=value).to_parameter_msg()

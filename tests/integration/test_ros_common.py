@@ -10,12 +10,13 @@ import time
 
 import pytest
 import rclpy
+from rcl_interfaces.srv import GetParameters
 from std_msgs.msg import String
 
 from pd_ros_common import names, params
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.gaps import SequenceGaps
-from pd_ros_common.session import RosSession
+from pd_ros_common.session import RosSession, wait_for_server
 from pd_ros_common.sources import PublisherNames
 from pd_sim_node.node import CHECKS as SIM_CHECKS
 from pd_sim_node.node import PARAMETERS as SIM_PARAMS
@@ -189,3 +190,22 @@ def test_two_sessions_hear_each_other_and_close_only_their_own_context():
         assert heard[0] == "hello"
     assert not talker.context.ok() and not listener.context.ok()
     assert rclpy.ok() == was_ok
+
+
+def test_wait_for_server_is_false_without_one_and_a_first_request_is_answered():
+    """`session.wait_for_server` says False when nobody serves; once it says True, the first
+    request of a fresh client is answered (the server has discovered the client as well)."""
+    with RosSession("pd_test_client") as me:
+        cli = me.node.create_client(GetParameters, "/pd_test_server/get_parameters")
+        t0 = time.monotonic()
+        assert not wait_for_server(me.executor, cli, 0.3)
+        assert time.monotonic() - t0 < 2.0
+        with RosSession("pd_test_server") as server:
+            assert wait_for_server(me.executor, cli, 10.0)
+            future = cli.call_async(GetParameters.Request(names=["use_sim_time"]))
+
+            def serve() -> None:
+                server.spin_once(0.0)
+
+            assert me.spin_until(future.done, 10.0, check=serve)
+            assert future.result().values[0].bool_value is False
