@@ -208,13 +208,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 # Ours for issue 10: the shipped `best` policy fine-tuned under domain randomisation over the whole
 # `standard` campaign, with demonstrations flown under the same dispersions (the episodes that
 # landed) and as many started from states the starting policy itself visits there (DAgger-style);
-# periodic evaluations fly the same campaign. One round from `best` reaches 97.8 +- 0.4 % campaign
-# mean over 3 seeds; each further round (`--init-policy` the previous round) starts its recovery
-# episodes where that round goes (models/pd_dqn_robust.md). Rounds stall near 99.0 % after four;
-# starting half the recovery episodes on the student's crash paths (--recovery-failed-share 0.5)
-# took the shipped lineage to 99.45 +- 0.06 %, and behind the braking shield (--shield, round 8)
-# to 99.81 +- 0.05 %, 99.99 +- 0.01 % with its touchdown guard (no retraining). From scratch,
-# with mpc-fuel + ZEM/ZEV demonstrations, 45 min reached only 42-51 % campaign mean.
+# periodic evaluations fly the same campaign. Each further round (`--init-policy` the previous
+# round) starts its recovery episodes where that round goes; --recovery-failed-share starts a
+# share of them on the student's crash paths. What each round reached: models/pd_dqn_robust.md
+# and docs/experiments/.
 PRESETS["robust"] = {
     **PRESETS["best"],
     "init_policy": "models/pd_dqn_best.pt",
