@@ -175,14 +175,15 @@ def test_burst_of_50_requests_is_answered_in_full(client, spin_until):
         node.destroy_client(c)
 
 
-def test_burst_of_50_from_one_client_of_pd_ros_common_answered_in_full(client, spin_until):
+def test_burst_of_50_from_one_client_of_pd_ros_common_answered_in_full(
+    client, spin_until, service_ready
+):
     """One client sends 50 requests at once: `pd_ros_common.clients.ocp_client` (depth 200, as
     the server) gets 50 answers (a default-QoS client, depth 10, lost 36 of 50)."""
     node = client.node
     cli = ocp_client(node)
     assert cli.qos_profile.depth == SERVICE_QOS.depth == 200
-    assert spin_until(cli.service_is_ready, 60.0)
-    spin_until(lambda: False, 1.0)  # discovery settles both ways
+    assert service_ready(cli, 60.0)
     futures = [cli.call_async(ocp_request(GOOD)) for _ in range(50)]
     assert spin_until(lambda: all(f.done() for f in futures), 90.0), sum(f.done() for f in futures)
     answers = [f.result() for f in futures]

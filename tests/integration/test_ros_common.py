@@ -203,9 +203,5 @@ def test_wait_for_server_is_false_without_one_and_a_first_request_is_answered():
         with RosSession("pd_test_server") as server:
             assert wait_for_server(me.executor, cli, 10.0)
             future = cli.call_async(GetParameters.Request(names=["use_sim_time"]))
-
-            def serve() -> None:
-                server.spin_once(0.0)
-
-            assert me.spin_until(future.done, 10.0, check=serve)
+            assert me.spin_until(future.done, 10.0, check=lambda: server.spin_once(0.0))
             assert future.result().values[0].bool_value is False
