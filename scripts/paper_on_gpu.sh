@@ -25,6 +25,7 @@ out=runs/paper_gpu
 seed=1
 checks=1
 dry=0
+margin_s=40 # for the run's last evaluation and save after --max-minutes
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --budget-s) budget="$2"; shift 2 ;;
@@ -41,7 +42,7 @@ train_args=(--preset paper-agent1 --seed "$seed" --num-envs 16 --updates-per-ste
     --device auto --progress false --run-dir "$out/run")
 minutes_of() { awk -v s="$1" 'BEGIN { printf "%.2f", s / 60 }'; }
 if [[ $dry == 1 ]]; then
-    echo pd-train "${train_args[@]}" --max-minutes "$(minutes_of $((budget - 40)))"
+    echo pd-train "${train_args[@]}" --max-minutes "$(minutes_of $((budget - margin_s)))"
     exit 0
 fi
 
@@ -69,7 +70,7 @@ if [[ $checks == 1 ]]; then
         echo "paper_on_gpu.sh: bench/train_speed.py failed; training anyway"
 fi
 
-left=$((budget - (SECONDS - t0) - 40))
+left=$((budget - (SECONDS - t0) - margin_s))
 if [[ $left -lt 60 ]]; then
     echo "paper_on_gpu.sh: only ${left} s left for training; stopping" >&2
     exit 1
