@@ -191,3 +191,13 @@ def test_shielded_run_evaluates_behind_the_shield_and_files_ask_for_it(tmp_path)
     assert shielded.final_states[:, 5].min() > bare.final_states[:, 5].min() + 5.0
     vk = summarise(shielded)["table7"]["k_velocity_mps"]["min"]
     assert tr.evaluate(episodes=20, seed=0)["kvel_min"] == pytest.approx(vk, abs=1e-9)
+
+
+def test_evaluations_by_updates_fall_on_fixed_update_counts_once_each(tmp_path):
+    # every 40 gradient updates (20 of pre-training, then interaction), whatever the clock;
+    # the run's last network (120 updates) is evaluated once, not again at the end
+    tr = Trainer(_small(tmp_path, "eu", eval_every_updates=40, eval_episodes=2), quiet=True)
+    tr.run()
+    rows = (tmp_path / "eu" / "evals.csv").read_text().splitlines()[1:]
+    assert [int(r.split(",")[1]) for r in rows] == [40, 80, 120]
+    assert tr.c.last_eval_updates == 120

@@ -143,6 +143,9 @@ class TrainConfig:
     paper's flat bonus); evaluation is unaffected"""
     eval_every_s: float = 60.0
     """greedy evaluation on eval_episodes seeded episodes every this many seconds (0: off)"""
+    eval_every_updates: int = 0
+    """> 0: evaluate every this many gradient updates (pre-training included) instead of by
+    time, so which networks are evaluated, and so best.pt, does not depend on the machine"""
     eval_episodes: int = 200
     """episodes of each periodic greedy evaluation (seed eval_seed, separate from pd-eval's)"""
     eval_seed: int = 900_000
@@ -275,6 +278,7 @@ _NON_NEGATIVE = (
     "dagger_rounds",
     "pretrain_updates",
     "eval_every_s",
+    "eval_every_updates",
     "checkpoint_every_s",
     "torch_threads",
     "precision_bonus",

@@ -67,7 +67,7 @@ class TrainingLoop:
         self.c.wall_s = self._now()
         if self.outcomes is not None:
             self._log_scenarios(self.c.wall_s)
-        if cfg.eval_every_s > 0:
+        if self._evals_on() and self.c.last_eval_updates != self.agent.updates:
             self._periodic_eval(logs)
         final = self.save_policies("final")
         self.checkpoint()
@@ -135,7 +135,7 @@ class TrainingLoop:
             and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
         ):
             if self.dagger_round < min(self.pretrained // cfg.pretrain_updates, cfg.dagger_rounds):
-                if cfg.eval_every_s > 0:
+                if self._evals_on() and self.c.last_eval_updates != self.agent.updates:
                     self._periodic_eval(logs)
                 info = self.dagger_round_labels()
                 self.c.wall_s = self._now()
@@ -237,12 +237,23 @@ class TrainingLoop:
 
     def _eval_and_checkpoint(self, logs: RunLogs, t: float) -> None:
         """The periodic work shared by pre-training and interaction: evaluate, then checkpoint."""
-        if self.cfg.eval_every_s > 0 and t - self.c.last_eval_s >= self.cfg.eval_every_s:
+        if self._eval_due(t):
             self._periodic_eval(logs)
         if t - self.c.last_ckpt_s >= self.cfg.checkpoint_every_s:
             self.c.wall_s = t
             self.c.last_ckpt_s = t
             self.checkpoint()
+
+    def _evals_on(self) -> bool:
+        return self.cfg.eval_every_updates > 0 or self.cfg.eval_every_s > 0
+
+    def _eval_due(self, t: float) -> bool:
+        """A periodic evaluation is due: by gradient updates (`eval_every_updates`) or else by
+        wall time (`eval_every_s`)."""
+        cfg = self.cfg
+        if cfg.eval_every_updates > 0:
+            return self.agent.updates - max(self.c.last_eval_updates, 0) >= cfg.eval_every_updates
+        return cfg.eval_every_s > 0 and t - self.c.last_eval_s >= cfg.eval_every_s
 
     def _loss_row(self) -> list[float]:
         li = self.last_info  # device tensors on the device path: read back here only
@@ -253,6 +264,7 @@ class TrainingLoop:
         ev = self.evaluate()
         t = self._now()
         self.c.last_eval_s = t
+        self.c.last_eval_updates = self.agent.updates
         self.c.wall_s = t
         logs.evals.row(t, self.agent.updates, self.c.episodes, *ev.values())
         logs.evals.flush()

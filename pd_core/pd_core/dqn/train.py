@@ -76,6 +76,7 @@ class Counters:
     wall_s: float = 0.0  # summed over resumed segments
     update_credit: float = 0.0
     last_eval_s: float = 0.0
+    last_eval_updates: int = -1  # gradient updates at the last periodic evaluation (-1: none)
     last_ckpt_s: float = 0.0
     best_eval: tuple[float, float] = (-1.0, 0.0)  # (success rate, -median fuel)
 
