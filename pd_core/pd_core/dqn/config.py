@@ -257,6 +257,11 @@ PRESETS["ocp-dagger"] = {
     "lr": 1e-4,
     "precision_bonus": 10.0,
     "max_minutes": 50.0,
+    # its evaluations swing by 1-14 points between networks 2000 updates apart: best.pt is
+    # picked from one every 2000 updates, each on 2000 episodes (docs/experiments/2026-11-26-
+    # selection-every-2000-updates.md)
+    "eval_every_updates": 2000,
+    "eval_episodes": 2000,
 }
 
 SCENARIO_SAMPLING = ("uniform", "failures")
