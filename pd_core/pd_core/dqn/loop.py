@@ -67,7 +67,7 @@ class TrainingLoop:
         self.c.wall_s = self._now()
         if self.outcomes is not None:
             self._log_scenarios(self.c.wall_s)
-        if self._evals_on() and self.c.last_eval_updates != self.agent.updates:
+        if self._unevaluated():
             self._periodic_eval(logs)
         final = self.save_policies("final")
         self.checkpoint()
@@ -135,7 +135,7 @@ class TrainingLoop:
             and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
         ):
             if self.dagger_round < min(self.pretrained // cfg.pretrain_updates, cfg.dagger_rounds):
-                if self._evals_on() and self.c.last_eval_updates != self.agent.updates:
+                if self._unevaluated():
                     self._periodic_eval(logs)
                 info = self.dagger_round_labels()
                 self.c.wall_s = self._now()
@@ -244,8 +244,10 @@ class TrainingLoop:
             self.c.last_ckpt_s = t
             self.checkpoint()
 
-    def _evals_on(self) -> bool:
-        return self.cfg.eval_every_updates > 0 or self.cfg.eval_every_s > 0
+    def _unevaluated(self) -> bool:
+        """Evaluations are on and the current network has not been evaluated yet."""
+        on = self.cfg.eval_every_updates > 0 or self.cfg.eval_every_s > 0
+        return on and self.c.last_eval_updates != self.agent.updates
 
     def _eval_due(self, t: float) -> bool:
         """A periodic evaluation is due: by gradient updates (`eval_every_updates`) or else by
