@@ -31,6 +31,22 @@ def test_labels_are_the_teachers_actions_on_the_states_the_student_flies() -> No
     assert 0.0 < np.mean(d["labels"] != d["proposed"]) < 1.0
 
 
+def test_label_noise_flies_random_actions_on_that_share_of_steps_and_labels_them_all() -> None:
+    clean = student_labels(POLICY, "zemzev", 3, 21, dispersions="delay", workers=1)
+    np.testing.assert_array_equal(clean["flown"], clean["proposed"])
+    d = student_labels(POLICY, "zemzev", 3, 21, dispersions="delay", workers=1, noise=0.3)
+    again = student_labels(POLICY, "zemzev", 3, 21, dispersions="delay", workers=1, noise=0.3)
+    np.testing.assert_array_equal(d["states"], again["states"])  # seeded by the episodes
+    # 0.3 of the steps fly one of the 147 actions drawn uniformly (1 in 147 is its own);
+    # ~700 steps: the share's sd is ~0.017
+    assert abs(np.mean(d["flown"] != d["proposed"]) - 0.3 * 146 / 147) < 0.07
+    assert len(d["states"]) != len(clean["states"])  # the flights differ
+    # every state is still labelled by the teacher, and proposed is still the network's own
+    np.testing.assert_array_equal(d["labels"], ZemZevController().act_batch(d["states"]))
+    net = load_policy(POLICY, shield="never").actor
+    np.testing.assert_array_equal(d["proposed"], net.act_batch(d["states"]))
+
+
 def test_label_transitions_step_the_nominal_dynamics() -> None:
     s = np.array([[10.0, -5.0, 300.0, 1.0, 0.5, -20.0, 1900.0], [0.1, 0.0, 0.05, 0, 0, -1.0, 1700]])
     t = label_transitions(s, np.array([100, 3]))

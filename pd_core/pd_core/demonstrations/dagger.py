@@ -8,6 +8,12 @@ flight. Each label becomes a one-step demonstration through the known dynamics (
 disturbance, the nominal engine): the state, the teacher's action and the state that action
 leads to, so the DQfD memory's TD and margin losses take it like any other demonstration.
 
+With `noise` > 0 the student flies a uniformly random action instead of its own on that share
+of its steps (noise injection, as DART: Laskey et al. 2017), so that the labelled states include
+the recoveries from its own errors that a greedy student seldom needs (the teacher still labels
+every state; `proposed` stays the network's own choice). The random draws are seeded by each
+chunk's first env seed.
+
 Chunks of `LABEL_CHUNK_EPISODES` episodes (chunk k: env seeds seed + k * chunk ...) run on a
 spawned process pool, or as Ray tasks given an address (`map_chunks`), so the labels do not
 depend on the number of workers or where they run.
@@ -33,13 +39,18 @@ LABEL_CHUNK_EPISODES = 25  # ours: episodes per pool task (as the demonstrations
 class ShadowTeacher:
     """Actor that flies the student's actions and records the teacher's on the same states."""
 
-    def __init__(self, student: Any, teacher: Any) -> None:
+    def __init__(
+        self, student: Any, teacher: Any, noise: float = 0.0, rng: np.random.Generator | None = None
+    ) -> None:
         self.student = student
         self.teacher = teacher
+        self.noise = noise
+        self.rng = rng or np.random.default_rng(0)
         self.name = getattr(student, "name", "student")
         self.states: list[np.ndarray] = []
         self.labels: list[np.ndarray] = []
         self.proposed: list[np.ndarray] = []
+        self.flown: list[np.ndarray] = []
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         s = np.array(states, dtype=float).reshape(-1, 7)
@@ -47,21 +58,27 @@ class ShadowTeacher:
         self.states.append(s)
         self.labels.append(np.asarray(self.teacher.act_batch(s), dtype=np.int64).reshape(-1))
         self.proposed.append(own)
+        if self.noise > 0.0:
+            swap = self.rng.random(len(own)) < self.noise
+            own = np.where(swap, self.rng.integers(0, DEFAULT_ACTIONS.n, len(own)), own)
+        self.flown.append(own)
         return own
 
 
 def _label_chunk(
-    policy_path: str, teacher: str, n: int, seed: int, dispersions: Any
+    policy_path: str, teacher: str, n: int, seed: int, dispersions: Any, noise: float = 0.0
 ) -> dict[str, np.ndarray]:
     """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer."""
     runtime = load_policy(policy_path, shield="always")
-    shadow = ShadowTeacher(runtime.actor, make_controller(teacher))
+    rng = np.random.default_rng(seed)
+    shadow = ShadowTeacher(runtime.actor, make_controller(teacher), noise, rng)
     runtime.actor = shadow
     ro = rollout(runtime, n, seed, dispersions=dispersions, chunk=n)
     return {
         "states": np.concatenate(shadow.states),
         "labels": np.concatenate(shadow.labels),
         "proposed": np.concatenate(shadow.proposed),
+        "flown": np.concatenate(shadow.flown),
         "landed": ro.landed,
     }
 
@@ -75,17 +92,21 @@ def student_labels(
     workers: int | None = None,
     chunk: int = LABEL_CHUNK_EPISODES,
     address: str = "",
+    noise: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """The teacher's labels on the states the student at `policy_path` decides on over
     episodes 0..n_episodes-1 (env seed seed + i, disturbances on, under `dispersions`):
-    states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, landed
+    states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, flown
+    (N,) the student's (its own, or random with `noise`) before its runtime layer, landed
     (n_episodes,) the student's outcomes. `workers` None = every core; `address`: on Ray
-    there instead (`map_chunks`)."""
+    there instead (`map_chunks`); `noise`: the share of steps flown with a random action."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    if not 0.0 <= noise < 1.0:
+        raise ValueError(f"noise must be in [0, 1), got {noise}")
     make_controller(teacher)  # an unknown name fails here, in the caller's process
     tasks = [
-        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions)
+        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions, noise)
         for k in range(0, n_episodes, chunk)
     ]
     parts = map_chunks(_label_chunk, tasks, workers, address)

@@ -105,6 +105,10 @@ class TrainConfig:
     """DAgger labels: `init_policy` flies this many episodes under `dispersions` behind the
     runtime layer and the (first) `controller` labels, in shadow, every state it decides on
     (pd_core.demonstrations.dagger); each label is a one-step demonstration"""
+    label_noise: float = 0.0
+    """DAgger labels: the share of the labelled episodes' steps on which the student flies a
+    uniformly random action instead of its own (noise injection, DART), so that the teacher
+    also labels the recoveries from errors a greedy student seldom makes; in [0, 1)"""
     dagger_rounds: int = 0
     """DAgger rounds after pre-training (Ross et al. 2011, aggregated): each flies the current
     network on `label_episodes` new episodes, adds the teacher's labels to the demonstrations
@@ -280,6 +284,7 @@ _NON_NEGATIVE = (
     "controller_demo_episodes",
     "recovery_demo_episodes",
     "label_episodes",
+    "label_noise",
     "dagger_rounds",
     "pretrain_updates",
     "eval_every_s",
@@ -319,6 +324,8 @@ def check_config(cfg: TrainConfig) -> None:
             "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
             f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
         )
+    if not cfg.label_noise < 1.0:
+        raise ValueError(f"label_noise must be < 1, got {cfg.label_noise!r}")
     if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):
         raise ValueError("dagger_rounds needs label_episodes, batch_demo and pretrain_updates > 0")
     if cfg.device not in DEVICES:

@@ -206,6 +206,7 @@ def label_part(
         cfg.seed + LABEL_SEED_OFFSET + round_index * cfg.label_episodes,
         cfg.dispersions,
         address=cfg.address,
+        noise=cfg.label_noise,
     )
     steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
     return demo_transitions(steps, cfg, reward_cfg), {
@@ -217,6 +218,7 @@ def label_part(
         "agreement": float(np.mean(d["labels"] == d["proposed"])),
         "student_success_rate": float(np.mean(d["landed"])),
         "dispersions": cfg.dispersions or "nominal",
+        "noise": cfg.label_noise,
     }
 
 
