@@ -249,13 +249,17 @@ PRESETS["ocp"] = {
 }
 
 # Ours for issue 32: DAgger after `ocp` (needs --init-policy, the `ocp` run's best.pt). Each
-# round the current network flies 500 new `standard` episodes behind its layer, mpc-fuel-reserve
-# labels every state it decides on, the labels join all earlier ones (aggregated) and 20k
-# pre-training updates follow; 500 more teacher episodes at the start; no interaction phase.
+# round the current network flies 500 new `standard` episodes behind its layer (a random action
+# on 10 % of its steps), mpc-fuel-reserve labels every state it decides on, the labels join all
+# earlier ones (aggregated) and 20k pre-training updates follow; 500 more teacher episodes at
+# the start; no interaction phase.
 PRESETS["ocp-dagger"] = {
     **PRESETS["ocp"],
     "controller_demo_episodes": 500,
     "label_episodes": 500,
+    # the teacher also labels recoveries from the student's errors (noise injection, measured
+    # in docs/experiments/2026-11-27-label-noise.md)
+    "label_noise": 0.1,
     "dagger_rounds": 6,
     "pretrain_updates": 20_000,
     "lr": 1e-4,
