@@ -38,6 +38,7 @@ from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.process import ProcessError, Supervisor, executable
 
 START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
+SETTLE_S = 2.0  # s between the stack being up and the episode, for DDS matching
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -102,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
         if not flight.spin_until(flight.stack_ready, START_TIMEOUT_S, sup.check_alive):
             tails = "\n".join(f"  {c.name}:\n{c.tail(5)}" for c in sup.children)
             raise FlightError(f"the stack did not come up within {START_TIMEOUT_S:g} s\n{tails}")
-        flight.spin_for(0.5)  # let discovery settle both ways
+        # let discovery settle both ways: the graph shows the recorder's readers before every
+        # publisher has matched them, and a VOLATILE reader misses what came before its match
+        # (CI once lost the first 107 of 242 commands after 0.5 s on a loaded machine)
+        flight.spin_for(SETTLE_S)
         print(f"pd_demo: 4 processes up after {time.monotonic() - t_start:.1f} s", flush=True)
 
         episode, s0 = flight.reset(args.seed)
