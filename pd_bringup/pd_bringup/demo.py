@@ -36,9 +36,9 @@ from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.convert import final_state
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.process import ProcessError, Supervisor, executable
+from pd_ros_common.session import SERVICE_SETTLE_S
 
 START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
-SETTLE_S = 2.0  # s between the stack being up and the episode, for DDS matching
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -103,10 +103,9 @@ def run(args: argparse.Namespace) -> int:
         if not flight.spin_until(flight.stack_ready, START_TIMEOUT_S, sup.check_alive):
             tails = "\n".join(f"  {c.name}:\n{c.tail(5)}" for c in sup.children)
             raise FlightError(f"the stack did not come up within {START_TIMEOUT_S:g} s\n{tails}")
-        # let discovery settle both ways: the graph shows the recorder's readers before every
-        # publisher has matched them, and a VOLATILE reader misses what came before its match
-        # (CI once lost the first 107 of 242 commands after 0.5 s on a loaded machine)
-        flight.spin_for(SETTLE_S)
+        # the writers have matched every reader (stack_ready); a service's response writer may
+        # still lag its client (pd_ros_common.session.wait_for_server)
+        flight.spin_for(SERVICE_SETTLE_S)
         print(f"pd_demo: 4 processes up after {time.monotonic() - t_start:.1f} s", flush=True)
 
         episode, s0 = flight.reset(args.seed)

@@ -10,9 +10,10 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
-from pd_ros_common import names, qos
+from pd_ros_common import diagnostics, names, qos
 from pd_ros_common.clients import ocp_client, reset_client
 from pd_ros_common.convert import (
     from_vec3,
@@ -37,10 +38,12 @@ class FlightClient(RosSession):
         self.states: list[LanderState] = []
         self.commands: list[ThrustCommand] = []
         self.results: list[EpisodeResult] = []
+        self.diagnostics: dict[str, str] = {}  # the latest value of every key heard
         sub = self.node.create_subscription
         sub(LanderState, names.STATE_TOPIC, self.states.append, qos.LOOP_SUB_QOS)
         sub(ThrustCommand, names.COMMAND_TOPIC, self.commands.append, qos.LOOP_SUB_QOS)
         sub(EpisodeResult, names.EPISODE_TOPIC, self.results.append, qos.EPISODE_QOS)
+        sub(DiagnosticArray, names.DIAGNOSTICS_TOPIC, self._on_diagnostics, qos.DIAGNOSTICS_QOS)
         self.reset_cli = reset_client(self.node)
         self.ocp_cli = ocp_client(self.node)  # the depth a burst of requests needs
 
@@ -51,17 +54,38 @@ class FlightClient(RosSession):
             raise FlightError(f"{client.srv_name}: no answer within {timeout_s:g} s")
         return future.result()
 
-    def stack_ready(self, listeners: int = 2) -> bool:
-        """Both services up, a policy publishing commands, and `listeners` subscribers of the
-        state and command topics besides this client (policy + recorder, simulator + recorder)."""
-        n = self.node
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            self.diagnostics.update(diagnostics.values_of(status))
+
+    def stack_ready(self, recorder: bool = True) -> bool:
+        """Both services up, and every topic the flight needs delivered to all its readers:
+        the simulator's and the policy's writers report (/diagnostics `readers <topic>`) that
+        they have matched this client, each other and, with `recorder`, a recorder of every
+        topic. A reliable, volatile writer sends only to the readers it has matched: without
+        this a recorder started beside the stack misses the first messages."""
+        rec = int(recorder)
+        need = {
+            names.STATE_TOPIC: 2 + rec,  # policy, this client
+            names.COMMAND_TOPIC: 2 + rec,  # simulator, this client
+            names.EPISODE_TOPIC: 1 + rec,  # this client
+            names.GUIDANCE_TOPIC: rec,
+            names.ODOM_TOPIC: rec,
+        }
         return (
             self.reset_cli.service_is_ready()
             and self.ocp_cli.service_is_ready()
-            and n.count_publishers(names.COMMAND_TOPIC) >= 1
-            and n.count_subscribers(names.STATE_TOPIC) >= listeners + 1
-            and n.count_subscribers(names.COMMAND_TOPIC) >= listeners + 1
+            and self.readers_at_least(need)
         )
+
+    def readers_at_least(self, need: dict[str, int]) -> bool:
+        """Every writer of `need`'s (relative) topics reports at least that many matched readers
+        in its latest /diagnostics."""
+        for topic, n in need.items():
+            key = f"readers {self.node.resolve_topic_name(topic)}"
+            if int(self.diagnostics.get(key, "-1")) < n:
+                return False
+        return True
 
     # ------------------------------------------------------------------ the flight
     def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:

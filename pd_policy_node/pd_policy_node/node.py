@@ -348,6 +348,7 @@ class PolicyNode(Node):
             "invalid states": self.invalid,
             "missing states (gaps)": self.gaps,
             "lost states (DDS)": self.lost,
+            **diagnostics.readers(self._cmd_pub, self._status_pub),
         }
         r.rule(
             diagnostics.ERROR,

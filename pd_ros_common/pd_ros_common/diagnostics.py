@@ -19,6 +19,11 @@ Levels, from simple rules over the last period (the README lists them):
 - pd_ocp_node: WARN when a request was answered busy or failed; else OK.
 - pd_record: ERROR when a message never reached the recorder (a gap or a DDS loss) or was not
   written, since the recording began; else OK.
+
+pd_sim_node and pd_policy_node also report `readers <topic>` for each topic they publish: the
+subscriptions their DDS writer has matched (`Publisher.get_subscription_count`). A reliable,
+volatile writer delivers only to the readers it has matched, so a tool that must not miss the
+first messages (pd_demo's recorder) waits for these counts, not for the ROS graph.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
 from pd_ros_common import names, qos
 
@@ -115,6 +121,11 @@ class Since:
         out = {k: v - self._last.get(k, 0) for k, v in totals.items()}
         self._last = dict(totals)
         return out
+
+
+def readers(*publishers: Publisher) -> dict[str, int]:
+    """{"readers <topic>": its matched subscriptions} of each publisher (DDS, not the graph)."""
+    return {f"readers {p.topic_name}": int(p.get_subscription_count()) for p in publishers}
 
 
 def status_name(node: Node, task: str) -> str:

@@ -643,6 +643,9 @@ class SimNode(Node):
             "foreign commands": foreign_total,
             "foreign (last period)": int(d["foreign"]),
             "other landers": others or "none",
+            **diagnostics.readers(
+                self._state_pub, self._episode_pub, self._odom_pub, self._path_pub
+            ),
         }
         r.rule(
             ERROR,

@@ -81,14 +81,16 @@ def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node
         reset = clients.reset_client(probe)
         ocp = clients.ocp_client(probe)
         assert spin_until(lambda: reset.service_is_ready() and ocp.service_is_ready(), START_S)
-        # the recorder and the policy hear the simulator before anything flies
+        # the writers report the readers they have matched (DDS, not the graph): the recorder,
+        # the policy and this probe hear the simulator, the recorder and the simulator the policy
         assert spin_until(
             lambda: (
-                probe.count_subscribers("/lander/state") >= 3
-                and probe.count_publishers("/lander/thrust_cmd") >= 1
+                int(diags.values(SIM).get("readers /lander/state", -1)) >= 3
+                and int(diags.values(POLICY).get("readers /lander/thrust_cmd", -1)) >= 2
+                and int(diags.values(POLICY).get("readers /lander/guidance_status", -1)) >= 1
             ),
             30.0,
-        ), procs.logs()
+        ), (diags.latest, procs.logs())
         spin_until(lambda: False, 1.0)
         future = reset.call_async(reset_request(None, seed=3))
         assert spin_until(future.done, 30.0) and future.result().success, procs.logs()
