@@ -10,7 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_ros_common import diagnostics, names, qos
@@ -38,12 +37,11 @@ class FlightClient(RosSession):
         self.states: list[LanderState] = []
         self.commands: list[ThrustCommand] = []
         self.results: list[EpisodeResult] = []
-        self.diagnostics: dict[str, str] = {}  # the latest value of every key heard
         sub = self.node.create_subscription
         sub(LanderState, names.STATE_TOPIC, self.states.append, qos.LOOP_SUB_QOS)
         sub(ThrustCommand, names.COMMAND_TOPIC, self.commands.append, qos.LOOP_SUB_QOS)
         sub(EpisodeResult, names.EPISODE_TOPIC, self.results.append, qos.EPISODE_QOS)
-        sub(DiagnosticArray, names.DIAGNOSTICS_TOPIC, self._on_diagnostics, qos.DIAGNOSTICS_QOS)
+        self.diagnostics = diagnostics.Listener(self.node)
         self.reset_cli = reset_client(self.node)
         self.ocp_cli = ocp_client(self.node)  # the depth a burst of requests needs
 
@@ -53,10 +51,6 @@ class FlightClient(RosSession):
         if not self.spin_until(future.done, timeout_s):
             raise FlightError(f"{client.srv_name}: no answer within {timeout_s:g} s")
         return future.result()
-
-    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            self.diagnostics.update(diagnostics.values_of(status))
 
     def stack_ready(self, recorder: bool = True) -> bool:
         """Both services up, and every topic the flight needs delivered to all its readers:
@@ -79,13 +73,10 @@ class FlightClient(RosSession):
         )
 
     def readers_at_least(self, need: dict[str, int]) -> bool:
-        """Every writer of `need`'s (relative) topics reports at least that many matched readers
-        in its latest /diagnostics."""
-        for topic, n in need.items():
-            key = f"readers {self.node.resolve_topic_name(topic)}"
-            if int(self.diagnostics.get(key, "-1")) < n:
-                return False
-        return True
+        """The writer of each of `need`'s (relative) topics reports at least that many matched
+        readers in its latest /diagnostics."""
+        resolve = self.node.resolve_topic_name
+        return all(self.diagnostics.readers(resolve(t)) >= n for t, n in need.items())
 
     # ------------------------------------------------------------------ the flight
     def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:

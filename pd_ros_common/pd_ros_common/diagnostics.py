@@ -177,3 +177,30 @@ def counts_share(counts: Mapping[str, int], base: str) -> dict[str, float]:
     of changed actions per rule, from `Runtime.counts`); 0 when nothing was decided yet."""
     total = sum(counts.values())
     return {k: (v / total if total else 0.0) for k, v in counts.items() if k != base}
+
+
+class Listener:
+    """Subscribes `node` to /diagnostics: the latest DiagnosticStatus of each name and every level
+    seen (for tools and tests that watch the stack)."""
+
+    def __init__(self, node: Node) -> None:
+        self.latest: dict[str, DiagnosticStatus] = {}
+        self.levels: dict[str, set[int]] = {}
+        node.create_subscription(
+            DiagnosticArray, names.DIAGNOSTICS_TOPIC, self._on, qos.DIAGNOSTICS_QOS
+        )
+
+    def _on(self, msg: DiagnosticArray) -> None:
+        for s in msg.status:
+            self.latest[s.name] = s
+            self.levels.setdefault(s.name, set()).add(level_of(s))
+
+    def values(self, name: str) -> dict[str, str]:
+        """{key: value} of the latest status of `name` ({} before the first)."""
+        return values_of(self.latest[name]) if name in self.latest else {}
+
+    def readers(self, topic: str) -> int:
+        """The matched readers the writer of the absolute `topic` reported last (-1 before it)."""
+        key = f"readers {topic}"
+        found = [int(v[key]) for v in map(values_of, self.latest.values()) if key in v]
+        return max(found, default=-1)

@@ -19,7 +19,6 @@ import sys
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from helpers import ROOT, ProcessSet, executable
 from nav_msgs.msg import Odometry, Path
 from rclpy.parameter import Parameter
@@ -27,9 +26,9 @@ from rosgraph_msgs.msg import Clock
 
 from pd_bringup.bag import read_bag
 from pd_interfaces.msg import EpisodeResult, LanderState
-from pd_ros_common import clients, names, qos
+from pd_ros_common import clients, qos
 from pd_ros_common.convert import from_vec3, ocp_request, reset_request
-from pd_ros_common.diagnostics import ERROR, OK, level_of, values_of
+from pd_ros_common.diagnostics import ERROR, OK, Listener
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -42,30 +41,11 @@ SIM, POLICY, OCP, RECORDER = (
 )
 
 
-class Diagnostics:
-    """The latest DiagnosticStatus of each name on /diagnostics, and every level seen."""
-
-    def __init__(self, node) -> None:
-        self.latest: dict = {}
-        self.levels: dict[str, set[int]] = {}
-        node.create_subscription(
-            DiagnosticArray, names.DIAGNOSTICS_TOPIC, self._on, qos.DIAGNOSTICS_QOS
-        )
-
-    def _on(self, msg: DiagnosticArray) -> None:
-        for s in msg.status:
-            self.latest[s.name] = s
-            self.levels.setdefault(s.name, set()).add(level_of(s))
-
-    def values(self, name: str) -> dict[str, str]:
-        return values_of(self.latest[name]) if name in self.latest else {}
-
-
 def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node, spin_until):
     procs = ProcessSet(tmp_path)
     bag = tmp_path / "bag"
     probe = make_node("diagnostics_probe")
-    diags = Diagnostics(probe)
+    diags = Listener(probe)
     states: list[LanderState] = []
     results: list[EpisodeResult] = []
     probe.create_subscription(LanderState, "/lander/state", states.append, qos.LOOP_SUB_QOS)
@@ -85,9 +65,9 @@ def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node
         # the policy and this probe hear the simulator, the recorder and the simulator the policy
         assert spin_until(
             lambda: (
-                int(diags.values(SIM).get("readers /lander/state", -1)) >= 3
-                and int(diags.values(POLICY).get("readers /lander/thrust_cmd", -1)) >= 2
-                and int(diags.values(POLICY).get("readers /lander/guidance_status", -1)) >= 1
+                diags.readers("/lander/state") >= 3
+                and diags.readers("/lander/thrust_cmd") >= 2
+                and diags.readers("/lander/guidance_status") >= 1
             ),
             30.0,
         ), (diags.latest, procs.logs())

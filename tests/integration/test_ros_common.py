@@ -1,5 +1,6 @@
 """pd_ros_common: parameter coercion and checks, sequence gaps, publisher names, sessions,
-names, domains; the simulator's command_source check."""
+names, domains, the readers a writer reports on /diagnostics; the simulator's command_source
+check."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import rclpy
 from rcl_interfaces.srv import GetParameters
 from std_msgs.msg import String
 
-from pd_ros_common import names, params
+from pd_ros_common import diagnostics, names, params
 from pd_ros_common.domain import claim_domain_id
 from pd_ros_common.gaps import SequenceGaps
 from pd_ros_common.session import RosSession, wait_for_server
@@ -205,3 +206,28 @@ def test_wait_for_server_is_false_without_one_and_a_first_request_is_answered():
             future = cli.call_async(GetParameters.Request(names=["use_sim_time"]))
             assert me.spin_until(future.done, 10.0, check=lambda: server.spin_once(0.0))
             assert future.result().values[0].bool_value is False
+
+
+def test_a_writer_reports_each_reader_it_has_matched_on_diagnostics():
+    """`diagnostics.readers` counts DDS-matched subscriptions: 0, then 2 once two sessions
+    subscribe; `diagnostics.Listener.readers` reads the latest figure (-1 before any)."""
+    with RosSession("pd_test_writer") as writer, RosSession("pd_test_watch") as watch:
+        pub = writer.node.create_publisher(String, "readers_probe", 10)
+
+        def report() -> diagnostics.Report:
+            return diagnostics.Report(values=diagnostics.readers(pub))
+
+        diagnostics.Diagnostics(writer.node, "probe", report, period_s=0.1)
+        listener = diagnostics.Listener(watch.node)
+        topic = "/readers_probe"
+        assert listener.readers(topic) == -1
+
+        def heard(n: int) -> bool:
+            return listener.readers(topic) == n
+
+        assert watch.spin_until(lambda: heard(0), 10.0, check=lambda: writer.spin_once(0.0))
+        assert listener.values("pd_test_writer: probe") == {f"readers {topic}": "0"}
+        watch.node.create_subscription(String, "readers_probe", lambda m: None, 10)
+        with RosSession("pd_test_reader") as reader:
+            reader.node.create_subscription(String, "readers_probe", lambda m: None, 10)
+            assert watch.spin_until(lambda: heard(2), 10.0, check=lambda: writer.spin_once(0.0))
