@@ -5,7 +5,7 @@ other does not, from `pd-eval ... --dispersions NAME --compare ... --out DIR`'s 
 
 Both agents fly the same episodes (episode i on seed s + i), so an episode is a pair. For each
 scenario: b = episodes A lands and B does not, c = the reverse, and the two-sided exact sign
-test p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2). A cell lists at most 50 failed
+test p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2). A cell lists at most 200 failed
 episodes (`LISTED_FAILURES_JSON`): where a count is larger the pairs are incomplete, and the
 line says so.
 """
