@@ -5,24 +5,17 @@ other does not, from `pd-eval ... --dispersions NAME --compare ... --out DIR`'s 
 
 Both agents fly the same episodes (episode i on seed s + i), so an episode is a pair. For each
 scenario: b = episodes A lands and B does not, c = the reverse, and the two-sided exact sign
-test p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2). A cell lists at most 200 failed
-episodes (`LISTED_FAILURES_JSON`): where a count is larger the pairs are incomplete, and the
-line says so.
+test p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2) (`pd_core.experiments.paired`).
+A cell lists at most 200 failed episodes (`LISTED_FAILURES_JSON`): where a count is larger the
+pairs are incomplete, and the line says so. The last line pools every scenario's pairs.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from math import comb
 
-
-def sign_test(b: int, c: int) -> float:
-    n = b + c
-    if n == 0:
-        return 1.0
-    k = min(b, c)
-    return min(1.0, 2.0 * sum(comb(n, i) for i in range(k + 1)) / 2.0**n)
+from pd_core.experiments.paired import pairs, sign_test
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,17 +30,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"A = {names[0]}, B = {names[1]}")
     head = f"{'scenario':<22}{'episodes':>9}{'A fails':>8}{'B fails':>8}"
     print(head + f"{'A ok, B not':>12}{'B ok, A not':>12}{'p':>8}")
+    pooled = [0, 0, 0, 0, 0]  # episodes, A fails, B fails, A only lands, B only lands
     for scen, cells in results.items():
-        fa, fb = (cells[n].get("failed_episodes", {"count": 0, "listed": []}) for n in names)
-        ea = {e["episode"] for e in fa["listed"]}
-        eb = {e["episode"] for e in fb["listed"]}
-        b, c = len(eb - ea), len(ea - eb)  # A lands & B fails, B lands & A fails
-        n_ep = cells[names[0]].get("episodes", "?")
-        note = "" if fa["count"] == len(ea) and fb["count"] == len(eb) else "  (failures truncated)"
+        ca, cb = cells[names[0]], cells[names[1]]
+        pr = pairs(ca, cb)
+        fails = [c.get("failed_episodes", {"count": 0})["count"] for c in (ca, cb)]
+        n_ep = int(ca.get("episodes", 0))
+        note = "" if pr.complete else "  (failures truncated)"
         print(
-            f"{scen:<22}{n_ep!s:>9}{fa['count']:>8}{fb['count']:>8}{b:>12}{c:>12}"
-            f"{sign_test(b, c):>8.3f}{note}"
+            f"{scen:<22}{n_ep:>9}{fails[0]:>8}{fails[1]:>8}{pr.a_only:>12}{pr.b_only:>12}"
+            f"{sign_test(pr.a_only, pr.b_only):>8.3f}{note}"
         )
+        for i, v in enumerate((n_ep, *fails, pr.a_only, pr.b_only)):
+            pooled[i] += v
+    n, f_a, f_b, b, c = pooled
+    print(f"{'pooled':<22}{n:>9}{f_a:>8}{f_b:>8}{b:>12}{c:>12}{sign_test(b, c):>8.2g}")
     return 0
 
 

@@ -1,0 +1,39 @@
+"""Paired comparison of two agents flown on the same episodes (episode i on seed s + i): the
+episodes only one of them lands, and the two-sided exact sign test on those pairs.
+
+A campaign cell (`campaign.json`'s results[scenario][agent]) lists its failed episodes by
+episode index (`failed_episodes.listed`, at most `campaign.LISTED_FAILURES_JSON`); the pairs are
+complete only where every failure is listed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+from scipy.stats import binomtest
+
+
+class Pairs(NamedTuple):
+    """Episodes A lands and B does not (`a_only`), the reverse (`b_only`), and whether both
+    cells listed every failure (else the counts are lower bounds)."""
+
+    a_only: int
+    b_only: int
+    complete: bool
+
+
+def sign_test(a_only: int, b_only: int) -> float:
+    """Two-sided exact sign test p of `a_only` against `b_only` discordant pairs (1 with none)."""
+    n = a_only + b_only
+    return 1.0 if n == 0 else float(binomtest(min(a_only, b_only), n, 0.5).pvalue)
+
+
+def pairs(cell_a: Mapping[str, Any], cell_b: Mapping[str, Any]) -> Pairs:
+    """The discordant pairs of two campaign cells of the same scenario and episodes."""
+    none = {"count": 0, "listed": []}
+    fa, fb = cell_a.get("failed_episodes", none), cell_b.get("failed_episodes", none)
+    ea = {e["episode"] for e in fa["listed"]}
+    eb = {e["episode"] for e in fb["listed"]}
+    complete = fa["count"] == len(ea) and fb["count"] == len(eb)
+    return Pairs(len(eb - ea), len(ea - eb), complete)

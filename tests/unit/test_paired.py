@@ -1,0 +1,29 @@
+"""pd_core.experiments.paired: discordant pairs of two campaign cells and the exact sign test."""
+
+from __future__ import annotations
+
+import pytest
+
+from pd_core.experiments.paired import pairs, sign_test
+
+
+def cell(failed: list[int], count: int | None = None) -> dict:
+    listed = [{"episode": e, "seed": e} for e in failed]
+    return {"episodes": 100, "failed_episodes": {"count": count or len(failed), "listed": listed}}
+
+
+def test_sign_test_is_exact_two_sided_and_one_without_discordant_pairs():
+    assert sign_test(0, 0) == 1.0
+    assert sign_test(5, 5) == 1.0
+    assert sign_test(10, 0) == pytest.approx(2 / 2**10)  # 2 P(X = 0), X ~ B(10, 1/2)
+    assert sign_test(0, 10) == sign_test(10, 0)
+    assert sign_test(9, 1) == pytest.approx(2 * 11 / 2**10)  # 2 P(X <= 1)
+    assert sign_test(214, 103) < 1e-9  # the label-noise doc's pooled pairs
+
+
+def test_pairs_count_episodes_only_one_agent_lands_and_flag_truncated_lists():
+    a, b = cell([1, 2, 3]), cell([3, 4])
+    assert pairs(a, b) == (1, 2, True)  # B fails 4 only: A lands it; A fails 1 and 2 only
+    assert pairs(b, a) == (2, 1, True)
+    assert pairs({"episodes": 100}, b) == (2, 0, True)  # no failure recorded: lands all
+    assert not pairs(cell([1], count=250), b).complete
