@@ -1,11 +1,12 @@
 """DAgger labels (issue 32): the teacher labels, in shadow, the states the student decides on."""
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
-from pd_core.config import DT_S
+from pd_core.config import DT_S, STATE_SCALE
 from pd_core.demonstrations.dagger import label_transitions, student_labels
 from pd_core.dqn.config import preset
 from pd_core.dqn.demo_memory import build_demo_memory, label_part
@@ -13,6 +14,7 @@ from pd_core.dqn.train import Trainer, training_reward
 from pd_core.dynamics import step
 from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.policy_file import load_policy
+from pd_core.state import sliding_near_pad
 from pd_core.teachers.zemzev import ZemZevController
 
 POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
@@ -81,9 +83,11 @@ def test_near_pad_label_copies_repeat_only_the_sliding_labels() -> None:
     assert info4["labels"] == n and info4["sliding_near_pad"] == sliding
     assert 0 < sliding < n / 2
     assert len(once.actions) == n and len(four.actions) == n + 3 * sliding
-    # every row of the copied memory is one of the labels, and each label is still there
-    rows = {tuple(r) for r in np.column_stack([four.obs, four.actions]).tolist()}
-    assert rows == {tuple(r) for r in np.column_stack([once.obs, once.actions]).tolist()}
+    # each sliding label is there four times, every other label once
+    copies = Counter(map(tuple, np.column_stack([four.obs, four.actions]).tolist()))
+    labels = np.column_stack([once.obs, once.actions])
+    expected = np.where(sliding_near_pad(once.obs / STATE_SCALE), 4, 1)
+    assert [copies[tuple(r)] for r in labels.tolist()] == expected.tolist()
 
 
 def test_dagger_rounds_add_labels_of_the_current_network_and_end_the_run(tmp_path: Path) -> None:
