@@ -29,13 +29,6 @@ def near_pad_features(scaled: np.ndarray) -> np.ndarray:
     return np.tanh(np.asarray(scaled)[..., :N_NEAR_PAD] * NEAR_PAD_GAIN)
 
 
-def sliding_near_pad(state: np.ndarray) -> np.ndarray:
-    """(...,) bool: below NEAR_PAD_SCALE's altitude (10 m) and moving sideways faster than its
-    horizontal speed (0.5 m/s), on physical states (..., 7): where a touchdown fails by sliding."""
-    s = np.asarray(state, dtype=float)
-    return (s[..., 2] < NEAR_PAD_SCALE[2]) & (np.hypot(s[..., 3], s[..., 4]) > NEAR_PAD_SCALE[3])
-
-
 def check_state(state: np.ndarray) -> np.ndarray:
     """A float (..., 7) copy of `state`, or ValueError saying what is wrong with it."""
     s = np.asarray(state, dtype=float)

@@ -1,20 +1,18 @@
 """DAgger labels (issue 32): the teacher labels, in shadow, the states the student decides on."""
 
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
-from pd_core.config import DT_S, STATE_SCALE
+from pd_core.config import DT_S
 from pd_core.demonstrations.dagger import label_transitions, student_labels
 from pd_core.dqn.config import preset
-from pd_core.dqn.demo_memory import build_demo_memory, label_part
+from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.train import Trainer, training_reward
 from pd_core.dynamics import step
 from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.policy_file import load_policy
-from pd_core.state import sliding_near_pad
 from pd_core.teachers.zemzev import ZemZevController
 
 POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
@@ -67,27 +65,6 @@ def test_demo_memory_takes_the_labels_of_the_init_policy() -> None:
     assert info["labels"]["episodes"] == 2 and info["labels"]["teacher"] == "zemzev"
     assert len(memory) == info["labels"]["labels"] > 100
     assert 0.0 < info["labels"]["agreement"] <= 1.0
-
-
-def test_near_pad_label_copies_repeat_only_the_sliding_labels() -> None:
-    def part(copies: int):  # the same episodes each time: round 0 of seed 1
-        cfg = preset(
-            "best", controller="zemzev", label_episodes=3, label_noise=0.3, dispersions="gusts",
-            n_step=3, near_pad_label_copies=copies,
-        )  # fmt: skip
-        return label_part(cfg, training_reward(cfg), POLICY, 0)
-
-    once, info = part(1)
-    four, info4 = part(4)
-    n, sliding = info["labels"], info["sliding_near_pad"]
-    assert info4["labels"] == n and info4["sliding_near_pad"] == sliding
-    assert 0 < sliding < n / 2
-    assert len(once.actions) == n and len(four.actions) == n + 3 * sliding
-    # each sliding label is there four times, every other label once
-    copies = Counter(map(tuple, np.column_stack([four.obs, four.actions]).tolist()))
-    labels = np.column_stack([once.obs, once.actions])
-    expected = np.where(sliding_near_pad(once.obs / STATE_SCALE), 4, 1)
-    assert [copies[tuple(r)] for r in labels.tolist()] == expected.tolist()
 
 
 def test_dagger_rounds_add_labels_of_the_current_network_and_end_the_run(tmp_path: Path) -> None:

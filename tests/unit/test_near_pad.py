@@ -15,7 +15,7 @@ from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.network import QNetwork
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.policy_file import load_policy, save_policy
-from pd_core.state import near_pad_features, scale_state, sliding_near_pad
+from pd_core.state import near_pad_features, scale_state
 
 torch.set_num_threads(1)
 
@@ -91,12 +91,3 @@ def test_input_normalisation_standardises_the_near_pad_inputs_too():
         ref = torch.nn.functional.linear((x - mu) / sd, w, agent.q.net[0].bias + (w / sd) @ mu)
         np.testing.assert_allclose(agent.q.net[0](x).numpy(), ref.numpy(), atol=1e-4)
     assert before.shape == after.shape == (len(obs), 147)
-
-
-def test_sliding_near_pad_means_below_10_m_and_over_half_a_metre_per_second_sideways():
-    s = np.tile([3.0, -2.0, 9.0, 0.4, 0.4, -1.0, 1700.0], (5, 1))  # 0.57 m/s sideways
-    s[1, 2] = 11.0  # too high
-    s[2, 3:5] = [0.3, 0.3]  # 0.42 m/s: too slow
-    s[3, 3:5] = [-2.5, 0.0]  # sliding back fast
-    s[4, 5] = -20.0  # the vertical speed does not count
-    assert sliding_near_pad(s).tolist() == [True, False, False, True, True]

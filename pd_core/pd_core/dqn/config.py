@@ -109,10 +109,6 @@ class TrainConfig:
     """DAgger labels: the share of the labelled episodes' steps on which the student flies a
     uniformly random action instead of its own (noise injection, DART), so that the teacher
     also labels the recoveries from errors a greedy student seldom makes; in [0, 1)"""
-    near_pad_label_copies: int = 1
-    """DAgger labels: each labelled state sliding near the pad (pd_core.state.sliding_near_pad:
-    below 10 m, over 0.5 m/s sideways) joins the demonstration memory this many times, so the
-    few states where touchdowns fail weigh more in the demonstration batches (1: once, as all)"""
     dagger_rounds: int = 0
     """DAgger rounds after pre-training (Ross et al. 2011, aggregated): each flies the current
     network on `label_episodes` new episodes, adds the teacher's labels to the demonstrations
@@ -332,8 +328,6 @@ def check_config(cfg: TrainConfig) -> None:
             "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
             f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
         )
-    if cfg.near_pad_label_copies < 1:
-        raise ValueError(f"near_pad_label_copies must be >= 1, got {cfg.near_pad_label_copies!r}")
     if not cfg.label_noise < 1.0:
         raise ValueError(f"label_noise must be < 1, got {cfg.label_noise!r}")
     if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):

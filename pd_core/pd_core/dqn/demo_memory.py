@@ -18,7 +18,7 @@ from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
 from pd_core.experiments.evaluate import rollout
 from pd_core.reward import reward as shaped_reward
 from pd_core.runtime.policy_file import load_policy
-from pd_core.state import scale_state, sliding_near_pad
+from pd_core.state import scale_state
 
 CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
@@ -209,10 +209,7 @@ def label_part(
         noise=cfg.label_noise,
     )
     steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
-    near = sliding_near_pad(d["states"])
-    rows = np.repeat(np.arange(len(near)), np.where(near, cfg.near_pad_label_copies, 1))
-    part = DemoTransitions(*(col[rows] for col in demo_transitions(steps, cfg, reward_cfg)))
-    return part, {
+    return demo_transitions(steps, cfg, reward_cfg), {
         "round": round_index,
         "teacher": teacher,
         "student": policy_path,
@@ -222,8 +219,6 @@ def label_part(
         "student_success_rate": float(np.mean(d["landed"])),
         "dispersions": cfg.dispersions or "nominal",
         "noise": cfg.label_noise,
-        "sliding_near_pad": int(near.sum()),
-        "near_pad_label_copies": cfg.near_pad_label_copies,
     }
 
 
