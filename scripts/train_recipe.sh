@@ -10,19 +10,22 @@
 #
 # With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
 # mpc-fuel-reserve, from scratch, under the `standard` dispersions, behind the runtime layer:
-#   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction (30 min);
+#   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction; 201,000
+#      gradient updates, evaluated every 10,000 (about 30 min here);
 #   2. `ocp-dagger` preset from stage 1's best.pt: 500 teacher episodes, then seven DAgger
 #      rounds (the initial network's and six more), each 500 new episodes flown by the current
 #      network and labelled by the teacher, aggregated, 20k pre-training updates after each;
-#      no interaction (about 35 min). About 65 min in all. The recipe's policy is stage 2's
-#      best.pt (models/pd_dqn_ocp.pt for seed 1).
+#      no interaction (about 35 min). About 65 min in all. Both stages are budgeted by updates,
+#      not wall time, so a seed gives the same file on any machine. The recipe's policy is
+#      stage 2's best.pt (models/pd_dqn_ocp.pt for seed 1).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator, with --teacher ocp):
 #   mpc-fuel-reserve  the recipe above (default);
 #   zemzev-vernier    the same two stages, ZEM/ZEV-vernier flying the demonstrations and labelling;
 #   open-loop         the paper's 33 open-loop OCP trajectories (data/demos_7x7x3.npz): one `ocp`
-#                     stage of 65 min (open-loop plans cannot label the student's states);
+#                     stage of 65 min of wall time, as measured (open-loop plans cannot label
+#                     the student's states);
 #   none              no demonstrations: one `ocp` stage of 65 min, interaction only.
 # Their run directories default to runs/ablation_<demonstrator>__S.
 #
@@ -126,7 +129,7 @@ if [[ "$teacher" == ocp && ( "$demonstrator" == open-loop || "$demonstrator" == 
     else
         arm=(--controller "" --controller-demo-episodes 0 --batch-demo 0 --pretrain-updates 0 --margin 0)
     fi
-    stage stage1 --preset ocp "${arm[@]}" --max-minutes 65
+    stage stage1 --preset ocp "${arm[@]}" --max-minutes 65 --max-updates 0 --eval-every-updates 0
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage1/best.pt"
     exit 0
 fi
@@ -134,7 +137,7 @@ if [[ "$teacher" == ocp ]]; then
     arm=()
     [[ "$demonstrator" == zemzev-vernier ]] && arm=(--controller zemzev-vernier)
     if [[ -z "$stage1" ]]; then
-        stage stage1 --preset ocp "${arm[@]}" --max-minutes 30
+        stage stage1 --preset ocp "${arm[@]}"
         stage1="$out/stage1/best.pt"
     fi
     stage stage2 --preset ocp-dagger "${arm[@]}" --init-policy "$stage1"

@@ -236,6 +236,8 @@ PRESETS["robust"] = {
 # Ours for issue 32: learns from the optimal-control teacher only, from scratch. Demonstrations
 # flown by mpc-fuel-reserve behind the runtime layer under the `standard` dispersions (those that
 # landed), DQfD pre-training on them, then interaction; no ZEM/ZEV episode, no starting weights.
+# Budgeted and evaluated by gradient updates, not wall time, so one seed gives one file on any
+# machine: 201,000 updates is what 30 min gave seed 1 on the 2-core reference machine.
 PRESETS["ocp"] = {
     **PRESETS["best"],
     "near_pad": True,
@@ -244,7 +246,9 @@ PRESETS["ocp"] = {
     "controller_demo_episodes": 1500,
     "demo_landed_only": True,
     "shield": True,
-    "max_minutes": 30.0,
+    "max_minutes": 0.0,
+    "max_updates": 201_000,
+    "eval_every_updates": 10_000,
     "eval_episodes": 300,
 }
 
@@ -264,7 +268,9 @@ PRESETS["ocp-dagger"] = {
     "pretrain_updates": 20_000,
     "lr": 1e-4,
     "precision_bonus": 10.0,
-    "max_minutes": 50.0,
+    # the rounds end the run (7 x 20k updates), whatever the machine's speed
+    "max_minutes": 0.0,
+    "max_updates": 0,
     # its evaluations swing by 1-14 points between networks 2000 updates apart: best.pt is
     # picked from one every 2000 updates, each on 2000 episodes (docs/experiments/2026-11-26-
     # selection-every-2000-updates.md)
