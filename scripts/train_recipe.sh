@@ -16,8 +16,8 @@
 #      rounds (the initial network's and six more), each 500 new episodes flown by the current
 #      network and labelled by the teacher, aggregated, 20k pre-training updates after each;
 #      no interaction (about 35 min). About 65 min in all. Both stages are budgeted by updates,
-#      not wall time, so a seed gives the same file on any machine. The recipe's policy is
-#      stage 2's best.pt (models/pd_dqn_ocp.pt for seed 1).
+#      not wall time, so a seed's file does not depend on the machine's speed or load. The
+#      recipe's policy is stage 2's best.pt (models/pd_dqn_ocp.pt for seed 1).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator, with --teacher ocp):

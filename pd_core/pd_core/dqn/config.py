@@ -236,8 +236,9 @@ PRESETS["robust"] = {
 # Ours for issue 32: learns from the optimal-control teacher only, from scratch. Demonstrations
 # flown by mpc-fuel-reserve behind the runtime layer under the `standard` dispersions (those that
 # landed), DQfD pre-training on them, then interaction; no ZEM/ZEV episode, no starting weights.
-# Budgeted and evaluated by gradient updates, not wall time, so one seed gives one file on any
-# machine: 201,000 updates is what 30 min gave seed 1 on the 2-core reference machine.
+# Budgeted and evaluated by gradient updates, not wall time, so a seed's file does not depend
+# on the machine's speed or load: 201,000 updates is what 30 min gave seed 1 on the 2-core
+# reference machine.
 PRESETS["ocp"] = {
     **PRESETS["best"],
     "near_pad": True,
