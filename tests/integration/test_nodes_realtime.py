@@ -3,7 +3,7 @@
 - /lander/state arrives at 5 Hz within 2 % over 10 s;
 - the policy node killed (SIGKILL) mid-flight and started again: the simulator keeps publishing
   (holding the last command) and control resumes within two steps of the new node being ready
-  (model loaded and DDS discovery done: the simulator and the probe have matched its endpoints).
+  (model loaded and DDS matching done both ways between it, the simulator and the probe).
 """
 
 from __future__ import annotations
@@ -125,10 +125,16 @@ def test_policy_killed_and_restarted_control_resumes(stack, make_node, spin_unti
     )
     stack["policy"] = new
     # Ready = model loaded and DDS matching done both ways: the simulator's state writer and
-    # command reader have matched the new node (the simulator logs its links), and our probe
-    # sees the node's command publisher.
+    # command reader have matched the new node (the simulator logs its links), the node's state
+    # reader has matched the simulator's writer (the node logs "policy connected"; matching is
+    # per endpoint, so this side may come later than the other), and our probe sees the node's
+    # command publisher.
     assert spin_until(
-        lambda: joined(links(sim), before) and command_writer_gids(probe.node) - old_gids,
+        lambda: (
+            joined(links(sim), before)
+            and "policy connected" in new.log()
+            and command_writer_gids(probe.node) - old_gids
+        ),
         START_S,
     ), sim.log() + new.log()
     ready_index = len(probe.states) - 1  # last state received when the node was ready
