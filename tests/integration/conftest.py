@@ -10,8 +10,15 @@ exclusive ``flock`` held until the session ends (``pd_ros_common.domain.claim_do
 with ``pd_demo``).
 Set ``PD_TEST_ROS_DOMAIN_ID=<id>`` to force one (for example to watch a test from another shell).
 
-Discovery is kept on loopback (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) and FastDDS is the
-RMW, also when pytest is run without ``source env.sh`` (rclpy must still be importable then).
+FastDDS is the RMW, also when pytest is run without ``source env.sh`` (rclpy must still be
+importable then). Discovery and data stay on loopback, over UDP only: ``fastdds_udp_loopback.xml``
+(the default participant profile, ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT`` so that rmw
+applies it) is rmw_fastrtps's LOCALHOST set-up without its shared-memory transport. These tests
+SIGKILL DDS participants on purpose (a recorder, a policy node), and a participant killed while it
+holds a shared-memory port can leave that port's lock taken, so that a later participant blocks in
+C, where no timeout reaches it (eProsima/Fast-DDS #1144, #5469). CI once hung past
+pytest-timeout in the test after the one that kills a recorder. UDP carries the same messages
+with the same QoS; only the copy path differs.
 
 Fixtures
 --------
@@ -30,6 +37,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 
@@ -38,7 +46,10 @@ from pd_ros_common.domain import claim_domain_id
 ROS_DOMAIN_ID, _domain_lock_fd = claim_domain_id("PD_TEST_ROS_DOMAIN_ID")
 os.environ["ROS_DOMAIN_ID"] = str(ROS_DOMAIN_ID)
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SYSTEM_DEFAULT"
+os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(
+    Path(__file__).with_name("fastdds_udp_loopback.xml")
+)
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
 
 # After the environment is settled: rclpy reads it when a context is initialised.
@@ -51,7 +62,8 @@ from pd_ros_common import session  # noqa: E402
 
 
 def pytest_report_header(config: pytest.Config) -> str:
-    return f"ROS_DOMAIN_ID={ROS_DOMAIN_ID} RMW_IMPLEMENTATION={os.environ['RMW_IMPLEMENTATION']}"
+    env = ("ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "FASTDDS_DEFAULT_PROFILES_FILE")
+    return " ".join(f"{k}={os.environ[k]}" for k in env)
 
 
 @pytest.fixture
