@@ -5,7 +5,8 @@
 
 Writes models/<name>.pt and .json (the run's metadata plus the run's wall time, env steps and
 updates per env step) and models/<name>.episodes.csv (episode, landed, return, k-velocity, fuel,
-epsilon: what Fig. 5 of `pd-eval --figures` reads beside the model). The report (.md) is written
+epsilon: what Fig. 5 of `pd-eval --figures` reads beside the model; none for a run that flew no
+episode of its own). The report (.md) is written
 by hand from `pd-eval`'s output.
 
 With --stages (the run folders of a multi-stage recipe, in order, the last one the shipped run),
@@ -84,6 +85,9 @@ def ship(
     shutil.copyfile(pt, out.with_suffix(".pt"))
     out.with_suffix(".json").write_text(json.dumps(meta, indent=2) + "\n")
     log = out.with_suffix(".episodes.csv")
+    if not rows:  # a run without interaction (DAgger rounds only) logs no episode
+        log.unlink(missing_ok=True)
+        return [out.with_suffix(".pt"), out.with_suffix(".json")]
     with log.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(KEEP)

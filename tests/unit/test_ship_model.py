@@ -57,6 +57,14 @@ def test_the_lineage_names_each_stage_its_command_and_every_source(tmp_path: Pat
     assert second["policy"] == f"{two}/best.pt" and second["updates"] == 54
 
 
+def test_a_run_without_episodes_ships_no_episode_log(tmp_path: Path) -> None:
+    run = fake_run(tmp_path / "stage2", "ocp-dagger", "", {}, 1)
+    (run / "episodes.csv").write_text("episode,landed,return,k_velocity_mps,fuel_kg,epsilon\n")
+    written = ship(run, tmp_path / "m", "best")
+    assert [p.suffix for p in written] == [".pt", ".json"]
+    assert not (tmp_path / "m.episodes.csv").exists()
+
+
 def test_stages_must_end_with_the_shipped_run(tmp_path: Path) -> None:
     one = fake_run(tmp_path / "stage1", "ocp", "", {}, 1)
     two = fake_run(tmp_path / "stage2", "ocp-dagger", "", {}, 1)
