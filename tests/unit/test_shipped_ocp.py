@@ -13,7 +13,9 @@ MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_ocp"
 
 def test_every_demonstration_and_label_of_the_lineage_came_from_the_ocp_teacher() -> None:
     meta = json.loads(MODEL.with_suffix(".json").read_text())
-    stages = meta["training"]["lineage"]["stages"]
+    lineage = meta["training"]["lineage"]
+    assert lineage["sources"] == ["mpc-fuel-reserve"]  # over every stage (scripts/ship_model.py)
+    stages = lineage["stages"]
     assert len(stages) == 2
     for stage in stages:
         demos = stage["demos"]
