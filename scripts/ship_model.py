@@ -6,8 +6,7 @@
 Writes models/<name>.pt and .json (the run's metadata plus the run's wall time, env steps and
 updates per env step) and models/<name>.episodes.csv (episode, landed, return, k-velocity, fuel,
 epsilon: what Fig. 5 of `pd-eval --figures` reads beside the model; none for a run that flew no
-episode of its own). The report (.md) is written
-by hand from `pd-eval`'s output.
+episode of its own). The report (.md) is written by hand from `pd-eval`'s output.
 
 With --stages (the run folders of a multi-stage recipe, in order, the last one the shipped run),
 the JSON also gets `training.lineage`: the recipe command and, per stage, its pd-train command
@@ -54,7 +53,8 @@ def lineage(recipe: str, stages: list[Path], policy: str) -> dict:
         demos = record["demos"]
         sources |= {c["name"] for c in demos.get("controller", [])}
         for labels in [demos.get("labels"), *demos.get("dagger_rounds", [])]:
-            sources |= {labels["teacher"]} if labels else set()
+            if labels:
+                sources.add(labels["teacher"])
         if "file" in demos:  # open-loop trajectories (--demos)
             sources.add(f"file {demos['file']['path']}")
     return {"recipe": recipe, "sources": sorted(sources), "stages": records}
