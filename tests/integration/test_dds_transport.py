@@ -27,20 +27,21 @@ rclpy.shutdown()
 """
 
 
-def test_a_node_of_the_suite_maps_no_shared_memory_port():
+def shm_ports_mapped(env: dict[str, str]) -> str:
+    """The child's report line, `shm ports mapped: N`, from a node started with `env`."""
     out = subprocess.run(
-        [sys.executable, "-c", CHILD], env=os.environ, capture_output=True, text=True, timeout=60
+        [sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=60
     )
     assert out.returncode == 0, out.stderr
-    assert "shm ports mapped: 0" in out.stdout, out.stdout + out.stderr
+    return out.stdout + out.stderr
+
+
+def test_a_node_of_the_suite_maps_no_shared_memory_port():
+    assert "shm ports mapped: 0" in shm_ports_mapped(dict(os.environ))
 
 
 def test_without_the_profile_fastdds_maps_shared_memory_ports():
     """The check above can fail: rmw's LOCALHOST range adds the shared-memory transport."""
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     env.pop("FASTDDS_DEFAULT_PROFILES_FILE")
-    out = subprocess.run(
-        [sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=60
-    )
-    assert out.returncode == 0, out.stderr
-    assert "shm ports mapped: 0" not in out.stdout, out.stdout + out.stderr
+    assert "shm ports mapped: 0" not in shm_ports_mapped(env)
