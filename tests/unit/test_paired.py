@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from pd_core.experiments.paired import pairs, sign_test
+from pd_core.experiments.paired import paired_curves, pairs, sign_test
 
 
 def cell(failed: list[int], count: int | None = None) -> dict:
@@ -27,3 +27,15 @@ def test_pairs_count_episodes_only_one_agent_lands_and_flag_truncated_lists():
     assert pairs(b, a) == (2, 1, True)
     assert pairs({"episodes": 100}, b) == (2, 0, True)  # no failure recorded: lands all
     assert not pairs(cell([1], count=250), b).complete
+
+
+def test_paired_curves_compare_networks_at_common_update_counts_only():
+    a = {2000: 0.95, 4000: 0.99, 6000: 0.97, 8000: 0.90}
+    b = {2000: 0.90, 4000: 0.99, 6000: 0.98, 10000: 1.0}
+    got = paired_curves(a, b)
+    assert got.networks == 3  # 8000 and 10000 are in one curve only
+    assert (got.a_higher, got.a_lower) == (1, 1)  # the tie at 4000 counts for neither
+    assert got.mean_a == pytest.approx((0.95 + 0.99 + 0.97) / 3)
+    assert got.mean_b == pytest.approx((0.90 + 0.99 + 0.98) / 3)
+    with pytest.raises(ValueError, match="no update count"):
+        paired_curves({2000: 1.0}, {4000: 1.0})

@@ -4,6 +4,9 @@ episodes only one of them lands, and the two-sided exact sign test on those pair
 A campaign cell (`campaign.json`'s results[scenario][agent]) lists its failed episodes by
 episode index (`failed_episodes.listed`, at most `campaign.LISTED_FAILURES_JSON`); the pairs are
 complete only where every failure is listed.
+
+Two training runs' selection curves (`evals.csv`: success rate against gradient updates, each
+network on the same selection episodes) pair by update count: `paired_curves`.
 """
 
 from __future__ import annotations
@@ -37,3 +40,30 @@ def pairs(cell_a: Mapping[str, Any], cell_b: Mapping[str, Any]) -> Pairs:
     eb = {e["episode"] for e in fb["listed"]}
     complete = fa["count"] == len(ea) and fb["count"] == len(eb)
     return Pairs(len(eb - ea), len(ea - eb), complete)
+
+
+class CurvePairs(NamedTuple):
+    """Networks at the same update count in two runs: how many, where A's success is higher,
+    where lower, and the mean success of each over those networks."""
+
+    networks: int
+    a_higher: int
+    a_lower: int
+    mean_a: float
+    mean_b: float
+
+
+def paired_curves(curve_a: Mapping[int, float], curve_b: Mapping[int, float]) -> CurvePairs:
+    """Pair two selection curves (updates -> success rate) on their common update counts."""
+    common = sorted(set(curve_a) & set(curve_b))
+    if not common:
+        raise ValueError("the two curves share no update count")
+    sa = [curve_a[u] for u in common]
+    sb = [curve_b[u] for u in common]
+    return CurvePairs(
+        networks=len(common),
+        a_higher=sum(x > y for x, y in zip(sa, sb, strict=True)),
+        a_lower=sum(x < y for x, y in zip(sa, sb, strict=True)),
+        mean_a=sum(sa) / len(sa),
+        mean_b=sum(sb) / len(sb),
+    )
