@@ -24,9 +24,9 @@
 #   mpc-fuel-reserve  the recipe above (default);
 #   zemzev-vernier    the same two stages, ZEM/ZEV-vernier flying the demonstrations and labelling;
 #   open-loop         the paper's 33 open-loop OCP trajectories (data/demos_7x7x3.npz): one `ocp`
-#                     stage of 65 min of wall time, as measured (open-loop plans cannot label
-#                     the student's states);
-#   none              no demonstrations: one `ocp` stage of 65 min, interaction only.
+#                     stage of the recipe's 341,000 gradient updates (201,000 + 7 x 20,000;
+#                     open-loop plans cannot label the student's states);
+#   none              no demonstrations: one `ocp` stage of 341,000 updates, interaction only.
 # Their run directories default to runs/ablation_<demonstrator>__S.
 #
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
@@ -123,13 +123,14 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
 }
 
 if [[ "$teacher" == ocp && ( "$demonstrator" == open-loop || "$demonstrator" == none ) ]]; then
-    # no closed-loop teacher to label with: the whole budget in one stage
+    # no closed-loop teacher to label with: the whole update budget (stage 1's 201,000 and
+    # stage 2's 7 x 20,000) in one stage, evaluated like stage 1
     if [[ "$demonstrator" == open-loop ]]; then
         arm=(--controller "" --controller-demo-episodes 0 --demos data/demos_7x7x3.npz)
     else
         arm=(--controller "" --controller-demo-episodes 0 --batch-demo 0 --pretrain-updates 0 --margin 0)
     fi
-    stage stage1 --preset ocp "${arm[@]}" --max-minutes 65 --max-updates 0 --eval-every-updates 0
+    stage stage1 --preset ocp "${arm[@]}" --max-updates 341000
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage1/best.pt"
     exit 0
 fi

@@ -98,8 +98,11 @@ def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path
     for cfg in (paper, none):
         assert cfg["preset"] == "ocp" and cfg["init_policy"] in ("", None)
         assert cfg["shield"] is True and cfg["dispersions"] == "standard"
-        # one stage holds the wall time the two-stage recipe takes here (65 min measured)
-        assert cfg["max_minutes"] == 65.0 and cfg["max_updates"] == 0
+        # one stage holds the two-stage recipe's gradient updates: stage 1's budget and the
+        # pre-training updates of stage 2's rounds (the initial network's and dagger_rounds more)
+        rounds = base[1]["dagger_rounds"] + 1
+        assert cfg["max_updates"] == base[0]["max_updates"] + rounds * base[1]["pretrain_updates"]
+        assert cfg["max_minutes"] == 0.0 and cfg["eval_every_updates"] == 10_000
 
 
 def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
