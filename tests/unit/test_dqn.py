@@ -124,6 +124,27 @@ def test_target_network_copied_every_n_t_updates():
     assert same()
 
 
+def test_weight_average_moves_one_minus_decay_of_the_way_each_update():
+    torch.manual_seed(0)
+    agent = DQNAgent(_tiny_cfg(weight_average=0.9))
+    assert agent.q_avg is not None and agent.policy_net is agent.q_avg
+    before = [p.clone() for p in agent.q_avg.parameters()]
+    agent.update(_batch())  # the online network moves; the average not yet
+    for a, b in zip(agent.q_avg.parameters(), before, strict=True):
+        assert torch.equal(a, b)
+    agent.average_step()
+    for a, b, w in zip(agent.q_avg.parameters(), before, agent.q.parameters(), strict=True):
+        torch.testing.assert_close(a, 0.9 * b + 0.1 * w, rtol=1e-6, atol=1e-7)
+        assert not torch.equal(a, w)
+    agent.reset_average()
+    for a, w in zip(agent.q_avg.parameters(), agent.q.parameters(), strict=True):
+        assert torch.equal(a, w)
+    # without an average the online network flies and the step does nothing
+    plain = DQNAgent(_tiny_cfg())
+    assert plain.q_avg is None and plain.policy_net is plain.q
+    plain.average_step()
+
+
 def _linear_net(weight: list[list[float]], bias: list[float]) -> QNetwork:
     net = QNetwork(2, 3, hidden=(), activation="tanh")
     with torch.no_grad():

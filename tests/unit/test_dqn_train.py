@@ -16,7 +16,7 @@ from pd_core.dqn.train import Trainer, train
 from pd_core.experiments.evaluate import rollout, summarise
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import load_policy
+from pd_core.runtime.policy_file import load_policy, read_policy
 
 torch.set_num_threads(1)
 NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
@@ -59,6 +59,28 @@ def test_resume_continues_exactly(tmp_path):
     for x, y in zip(_weights(full), _weights(res), strict=True):
         assert torch.equal(x, y)
     assert res.c.episodes == full.c.episodes and res.c.env_steps == full.c.env_steps
+
+
+def test_weight_average_is_what_flies_and_resumes_exactly(tmp_path):
+    full = Trainer(
+        _small(tmp_path, "full", seed=2, max_updates=160, weight_average=0.99), quiet=True
+    )
+    full.run()
+    half = Trainer(
+        _small(tmp_path, "half", seed=2, max_updates=90, weight_average=0.99), quiet=True
+    )
+    half.run()
+    res = Trainer.resume(tmp_path / "half", {"max_updates": 160})
+    res.quiet = True
+    res.run()
+    avg = [v.clone() for v in full.agent.q_avg.state_dict().values()]
+    for x, y in zip(avg, res.agent.q_avg.state_dict().values(), strict=True):
+        assert torch.equal(x, y)
+    # the saved policy holds the average, not the online weights
+    _, tensors = read_policy(full.run_dir / "final.pt")
+    for name, x in full.agent.q_avg.state_dict().items():
+        assert torch.equal(x, torch.as_tensor(tensors[name]))
+    assert not all(torch.equal(x, y) for x, y in zip(avg, _weights(full), strict=True))
 
 
 def test_demo_memory_untouched_by_training(tmp_path):

@@ -80,6 +80,12 @@ class DQNAgent:
         self.q_target = copy.deepcopy(self.q)
         for p in self.q_target.parameters():
             p.requires_grad_(False)
+        # the Polyak average of the online weights (cfg.weight_average > 0), else none
+        self.q_avg: QNetwork | None = None
+        if cfg.weight_average > 0.0:
+            self.q_avg = copy.deepcopy(self.q)
+            for p in self.q_avg.parameters():
+                p.requires_grad_(False)
         # capturable only where asked: the CPU path's optimiser is the one it always had
         extra: dict[str, Any] = {"capturable": True} if capturable else {}
         if cfg.optimizer == "rmsprop":
@@ -104,6 +110,7 @@ class DQNAgent:
             first.bias.sub_(w @ mu)
             first.weight.copy_(w)
         self.sync_target()
+        self.reset_average()
 
     def act(self, obs: np.ndarray, epsilon: float, rng: np.random.Generator) -> np.ndarray:
         """Epsilon-greedy actions (B,) for scaled observations (B, 7)."""
@@ -181,17 +188,42 @@ class DQNAgent:
     def sync_target(self) -> None:
         self.q_target.load_state_dict(self.q.state_dict())
 
+    @property
+    def policy_net(self) -> QNetwork:
+        """The network that flies: the averaged one where there is one, else the online one."""
+        return self.q if self.q_avg is None else self.q_avg
+
+    def reset_average(self) -> None:
+        """Restart the average at the online network's weights (a new starting point)."""
+        if self.q_avg is not None:
+            self.q_avg.load_state_dict(self.q.state_dict())
+
+    def average_step(self) -> None:
+        """w_avg <- d w_avg + (1 - d) w for every parameter (d = cfg.weight_average); buffers
+        are copied. Called once per gradient update; nothing without an average."""
+        if self.q_avg is None:
+            return
+        with torch.no_grad():
+            w = 1.0 - self.cfg.weight_average
+            for a, p in zip(self.q_avg.parameters(), self.q.parameters(), strict=True):
+                a.lerp_(p, w)
+            for a, b in zip(self.q_avg.buffers(), self.q.buffers(), strict=True):
+                a.copy_(b)
+
     def state_dict(self) -> dict[str, Any]:
         return {
             "q": self.q.state_dict(),
             "q_target": self.q_target.state_dict(),
             "opt": self.opt.state_dict(),
             "updates": self.updates,
+            **({"q_avg": self.q_avg.state_dict()} if self.q_avg is not None else {}),
         }
 
     def load_state_dict(self, d: dict[str, Any]) -> None:
         self.q.load_state_dict(d["q"])
         self.q_target.load_state_dict(d["q_target"])
+        if self.q_avg is not None:
+            self.q_avg.load_state_dict(d["q_avg"])
         self.opt.load_state_dict(d["opt"])
         self._own_optimiser_flags()
         self.updates = int(d["updates"])

@@ -114,6 +114,11 @@ class TrainConfig:
     network on `label_episodes` new episodes, adds the teacher's labels to the demonstrations
     (none is dropped), then pre-trains `pretrain_updates` more; the run ends after the last
     round, with no interaction phase (0: none)"""
+    weight_average: float = 0.0
+    """Polyak averaging: after every gradient update the averaged network moves towards the
+    online one, w_avg <- d w_avg + (1 - d) w, with this decay d (horizon 1 / (1 - d) updates);
+    the evaluations, best.pt, final.pt and the DAgger student fly the averaged network. 0: the
+    online network itself; in [0, 1)"""
     recovery_failed_share: float = 0.0
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
@@ -335,6 +340,8 @@ def check_config(cfg: TrainConfig) -> None:
             "scenario_uniform_share must lie in [0, 1] and scenario_window be >= 1, got "
             f"{cfg.scenario_uniform_share!r}, {cfg.scenario_window!r}"
         )
+    if not 0.0 <= cfg.weight_average < 1.0:
+        raise ValueError(f"weight_average must lie in [0, 1), got {cfg.weight_average!r}")
     if not cfg.label_noise < 1.0:
         raise ValueError(f"label_noise must be < 1, got {cfg.label_noise!r}")
     if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):

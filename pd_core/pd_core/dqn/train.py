@@ -199,6 +199,7 @@ class Trainer(TrainingLoop):
                 f"{self.agent.q.shape_metadata()}"
             ) from None
         self.agent.sync_target()
+        self.agent.reset_average()
 
     def _normalisation_states(self) -> np.ndarray:
         """Scaled states to standardise the inputs with: the demonstrations', or else the
@@ -268,7 +269,13 @@ class Trainer(TrainingLoop):
     # ---- pieces of the loop
     def update(self, pretraining: bool = False) -> dict[str, Any]:
         """One gradient update on a minibatch of the replay memories (the demonstrations only
-        while pre-training), on the path `replay` chose; the loss parts, floats or tensors."""
+        while pre-training), on the path `replay` chose, then one step of the weight average;
+        the loss parts, floats or tensors."""
+        info = self._gradient_update(pretraining)
+        self.agent.average_step()
+        return info
+
+    def _gradient_update(self, pretraining: bool) -> dict[str, Any]:
         if self.replay_path == "host":
             return self.agent.update(self.sample(pretraining))
         if self._device_update is None:
@@ -309,13 +316,15 @@ class Trainer(TrainingLoop):
         }
 
     def cpu_network(self) -> Any:
-        """The online network on the CPU (itself there; else a copy of its current weights):
-        what the periodic evaluation flies and the policy files hold."""
+        """The network that flies (`agent.policy_net`: the weight average, else the online
+        network) on the CPU, itself there, else a copy of its current weights: what the periodic
+        evaluation and the DAgger student fly and the policy files hold."""
+        net = self.agent.policy_net
         if self.device.type == "cpu":
-            return self.agent.q
+            return net
         if self._q_cpu is None:
-            self._q_cpu = copy.deepcopy(self.agent.q).cpu()
-        self._q_cpu.load_state_dict(self.agent.q.state_dict())
+            self._q_cpu = copy.deepcopy(net).cpu()
+        self._q_cpu.load_state_dict(net.state_dict())
         return self._q_cpu
 
     def sample(self, pretraining: bool = False) -> ReplaySample:
