@@ -191,9 +191,11 @@ def test_lockstep_clock_runs_on_across_episodes(tmp_path, make_node, spin_until)
     assert len(t) > 30 and np.all(np.diff(t) >= 0.0)
     flown = sum(r.time_of_flight for r in results[:3])
     assert t[-1] >= flown + 0.2 * 2 - 1e-6, (t[-1], flown)
-    # a node with use_sim_time is on the simulation clock, not the wall clock (~1.7e9 s)
+    # a node with use_sim_time is on the simulation clock (tens of seconds here), not the wall
+    # clock (~1.7e9 s). Its own /clock subscription may be ahead of the probe's list, which
+    # lags or drops on a loaded machine (38.0 against 23.4 s seen), so t[-1] is no bound.
     now_s = follower.get_clock().now().nanoseconds * 1e-9
-    assert 0.0 < now_s <= t[-1] + 1e-6, now_s
+    assert 0.0 < now_s < 1e4, now_s
     # odometry: one per state, the same position and velocity, in the landing-site frame
     # one per state; the stop may fall between a state and its odometry (the last one only)
     assert len(states) - 1 <= len(odom) <= len(states), (len(odom), len(states))
