@@ -270,6 +270,9 @@ PRESETS["ocp-dagger"] = {
     # the teacher also labels recoveries from the student's errors (noise injection, measured
     # in docs/experiments/2026-11-27-label-noise.md)
     "label_noise": 0.1,
+    # the evaluations, the DAgger student and the files fly a Polyak average of the weights
+    # (horizon 2000 updates; docs/experiments/2026-11-27-weight-average.md)
+    "weight_average": 0.9995,
     "dagger_rounds": 6,
     "pretrain_updates": 20_000,
     "lr": 1e-4,
