@@ -39,6 +39,7 @@ from pd_ros_common.process import ProcessError, Supervisor, executable
 from pd_ros_common.session import SERVICE_SETTLE_S
 
 START_TIMEOUT_S = 60.0  # node start-up on a busy 2-core machine (torch import)
+RECORDED_TIMEOUT_S = 15.0  # the recorder's last messages after the flight, under load
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -118,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
         result = flight.result_of(episode, budget, sup.check_alive)
         wall = time.monotonic() - t_fly
         states, thrust = flight.trajectory(episode)
+        if not flight.spin_until(flight.recorded_all, RECORDED_TIMEOUT_S, sup.check_alive):
+            wait = f"{RECORDED_TIMEOUT_S:g} s"
+            print(f"pd_demo: the recorder did not report every message in {wait}", flush=True)
     finally:
         sup.stop_all(first="pd_record")  # the recorder first: it closes the bag
         if flight is not None:

@@ -78,6 +78,20 @@ class FlightClient(RosSession):
         resolve = self.node.resolve_topic_name
         return all(self.diagnostics.readers(resolve(t)) >= n for t, n in need.items())
 
+    def recorded_all(self) -> bool:
+        """A recorder reports (its /diagnostics `messages <topic>`, written to the bag) at least
+        the states and commands this client heard, and a guidance status for every command.
+        The recorder reads other writers than this client, and under load its last messages
+        arrive later: stop it only once this holds."""
+        n_cmd = len(self.commands)
+        need = {
+            names.STATE_TOPIC: len(self.states),
+            names.COMMAND_TOPIC: n_cmd,
+            names.GUIDANCE_TOPIC: n_cmd,
+        }
+        resolve = self.node.resolve_topic_name
+        return all(self.diagnostics.highest(f"messages {resolve(t)}") >= n for t, n in need.items())
+
     # ------------------------------------------------------------------ the flight
     def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:
         """(episode, initial state) of a new episode, as the simulator reports it."""

@@ -199,8 +199,11 @@ class Listener:
         """{key: value} of the latest status of `name` ({} before the first)."""
         return values_of(self.latest[name]) if name in self.latest else {}
 
-    def readers(self, topic: str) -> int:
-        """The matched readers the writer of the absolute `topic` reported last (-1 before it)."""
-        key = f"readers {topic}"
+    def highest(self, key: str) -> int:
+        """The highest integer value of `key` in any name's latest status (-1 before one)."""
         found = [int(v[key]) for v in map(values_of, self.latest.values()) if key in v]
         return max(found, default=-1)
+
+    def readers(self, topic: str) -> int:
+        """The matched readers the writer of the absolute `topic` reported last (-1 before it)."""
+        return self.highest(f"readers {topic}")
