@@ -75,8 +75,12 @@ class FlightClient(RosSession):
     def readers_at_least(self, need: dict[str, int]) -> bool:
         """The writer of each of `need`'s (relative) topics reports at least that many matched
         readers in its latest /diagnostics."""
+        return self._reported_at_least("readers", need)
+
+    def _reported_at_least(self, key: str, need: dict[str, int]) -> bool:
+        """Some node's latest /diagnostics has `<key> <topic>` >= n for each (relative) topic."""
         resolve = self.node.resolve_topic_name
-        return all(self.diagnostics.readers(resolve(t)) >= n for t, n in need.items())
+        return all(self.diagnostics.highest(f"{key} {resolve(t)}") >= n for t, n in need.items())
 
     def recorded_all(self) -> bool:
         """A recorder reports (its /diagnostics `messages <topic>`, written to the bag) at least
@@ -89,8 +93,7 @@ class FlightClient(RosSession):
             names.COMMAND_TOPIC: n_cmd,
             names.GUIDANCE_TOPIC: n_cmd,
         }
-        resolve = self.node.resolve_topic_name
-        return all(self.diagnostics.highest(f"messages {resolve(t)}") >= n for t, n in need.items())
+        return self._reported_at_least("messages", need)
 
     # ------------------------------------------------------------------ the flight
     def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:
