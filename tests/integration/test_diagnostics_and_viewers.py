@@ -86,7 +86,10 @@ def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node
                 int(diags.values(SIM).get("steps", 0)) == results[0].steps
                 and int(diags.values(POLICY).get("answered", 0)) >= results[0].steps
                 and int(diags.values(OCP).get("succeeded", 0)) >= 1
-                and int(diags.values(RECORDER).get("messages /lander/state", 0)) > 0
+                # every state and its odometry written: under load the recorder's last ones
+                # arrive after the probe's (as pd_demo's FlightClient.recorded_all)
+                and int(diags.values(RECORDER).get("messages /lander/state", 0)) > results[0].steps
+                and int(diags.values(RECORDER).get("messages /lander/odom", 0)) > results[0].steps
             )
 
         assert spin_until(reported, 60.0), (diags.latest, procs.logs())
