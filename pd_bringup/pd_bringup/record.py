@@ -10,7 +10,9 @@ stamped with their receive time (as `ros2 bag record` does). The subscription ca
 queue the bytes; a writer thread writes them and closes an MCAP chunk every `--flush` seconds, so
 a SIGKILL loses at most that much and the bag still opens (`pd_bringup.bag.read_bag`). Each
 publisher's sequence numbers are followed: a message that never reached the recorder (a gap) is
-counted and logged, and the exit status is then 1. Ctrl-C or SIGTERM (at any moment, again
+counted and logged, and the exit status is then 1. On the latest-value topics (lander/path,
+ocp/plan: depth 1, `qos.keeps_latest_only`) a newer path may replace one not yet delivered, by
+design; those are counted as superseded, not lost. Ctrl-C or SIGTERM (at any moment, again
 during the stop, as `ros2 launch` sends SIGINT then SIGTERM) stops recording within a second:
 what has arrived is written, the bag is closed and its metadata.yaml written, exit status 0. Each
 topic's offered QoS (from the ROS graph when its first message arrives; for a topic never heard,
@@ -96,6 +98,9 @@ class Recorder(Node):
         wanted = list(dict.fromkeys(self.resolve_topic_name(t) for t in topics))
         self.types = self._resolve_types(wanted, known, discovery_s)
         self.topics = [t for t in wanted if t in self.types]
+        self.latest_only = [  # a gap on these is a superseded message, not a loss
+            t in self.known_qos and qos.keeps_latest_only(self.known_qos[t]) for t in self.topics
+        ]
         self.lost_events = 0
         for i, topic in enumerate(self.topics):
             self.create_subscription(
@@ -176,6 +181,7 @@ class Recorder(Node):
             **{f"messages {t}": n for t, n in zip(self.topics, counts, strict=True)},
             "gaps (never arrived)": sum(gaps),
             **{f"gaps {t}": n for t, n in zip(self.topics, gaps, strict=True) if n},
+            "superseded (latest-value topics)": sum(w.superseded),
             "lost (DDS events)": self.lost_events,
             "queued": w.sink.qsize(),
         }
@@ -201,6 +207,7 @@ class BagWriter(threading.Thread):
         self.conns: dict[int, Any] = {}
         self.counts = [0] * len(rec.topics)
         self.gaps = [0] * len(rec.topics)
+        self.superseded = [0] * len(rec.topics)
         self.unwritten = 0
         self._gaps = [SequenceGaps() for _ in rec.topics]
         self._stop_at: float | None = None
@@ -243,7 +250,9 @@ class BagWriter(threading.Thread):
         self.writer.write(self.conns[index], stamp, raw)
         self.counts[index] += 1
         missing, first, last = self._gaps[index].update(info)
-        if missing:
+        if missing and self.rec.latest_only[index]:
+            self.superseded[index] += missing
+        elif missing:
             self.gaps[index] += missing
             self.rec.get_logger().warning(
                 f"{missing} message(s) of {topic} never reached the recorder (publisher "
@@ -269,7 +278,8 @@ class BagWriter(threading.Thread):
         parts = []
         for i, topic in enumerate(self.rec.topics):
             lost = f", {self.gaps[i]} LOST" if self.gaps[i] else ""
-            parts.append(f"{topic}: {self.counts[i]}{lost}")
+            newer = f", {self.superseded[i]} superseded" if self.superseded[i] else ""
+            parts.append(f"{topic}: {self.counts[i]}{lost}{newer}")
         if self.unwritten:
             parts.append(f"{self.unwritten} queued at the stop deadline NOT WRITTEN")
         return ", ".join(parts)

@@ -18,7 +18,8 @@ Levels, from simple rules over the last period (the README lists them):
   p99 exceeded `SLOW_DECISION_S` (half a 0.2 s step); else OK.
 - pd_ocp_node: WARN when a request was answered busy or failed; else OK.
 - pd_record: ERROR when a message never reached the recorder (a gap or a DDS loss) or was not
-  written, since the recording began; else OK.
+  written, since the recording began; else OK. A path superseded on a latest-value topic
+  (lander/path, ocp/plan) is reported, not an error.
 
 pd_sim_node and pd_policy_node also report `readers <topic>` for each topic they publish: the
 subscriptions their DDS writer has matched (`Publisher.get_subscription_count`). A reliable,

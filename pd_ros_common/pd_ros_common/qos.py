@@ -9,7 +9,10 @@ but it decides what is lost:
   replay at full speed, a publisher's whole history after a stall) waits in the queue instead of
   being dropped; what is still dropped is counted (message-lost events and step gaps).
 Episode results are TRANSIENT_LOCAL: a late subscriber still gets the last ones; so are the
-paths (lander/path, ocp/plan: depth 1, a viewer started late still draws the last one).
+paths (lander/path, ocp/plan: depth 1, a viewer started late still draws the last one). A path
+is a latest-value topic (`keeps_latest_only`): each message holds the whole path so far, and a
+newer one may replace one not yet delivered, by design; a recorder counts those as superseded,
+not lost.
 /diagnostics is RELIABLE, VOLATILE, depth 10 (as diagnostic_updater). /clock is RELIABLE, VOLATILE,
 depth 10: rclpy's own /clock subscription (BEST_EFFORT, depth 1) and any RELIABLE one match it.
 Services keep `SERVICE_DEPTH` requests and responses (the default 10 loses most of a burst).
@@ -30,6 +33,12 @@ def _profile(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATIL
         reliability=ReliabilityPolicy.RELIABLE,
         durability=durability,
     )
+
+
+def keeps_latest_only(profile: QoSProfile) -> bool:
+    """True for a latest-value profile (KEEP_LAST, depth 1): its writer replaces a sample not
+    yet delivered by the next one, so a skipped sequence number is superseded, not lost."""
+    return profile.history == HistoryPolicy.KEEP_LAST and profile.depth == 1
 
 
 LOOP_PUB_QOS = _profile(HISTORY_DEPTH)  # /lander/state, /lander/thrust_cmd publishers

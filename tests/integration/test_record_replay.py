@@ -7,6 +7,8 @@
   root namespace (it died in rcl on a bare `-r`);
 - /lander/guidance_status (pd_interfaces/msg/GuidanceStatus) is recorded by default and replayed
   field for field;
+- on a latest-value topic (lander/path, depth 1) a path replaced before delivery is counted as
+  superseded, not lost: exit status 0, and every message sent is either recorded or superseded;
 - pd_replay waits for a subscriber by default (a subscriber that comes late gets every message),
   gives up in one line when nobody subscribes, and `--no-wait` publishes at once.
 """
@@ -18,7 +20,9 @@ import re
 import signal
 
 import pytest
+from geometry_msgs.msg import PoseStamped
 from helpers import ProcessSet, executable, wait_for
+from nav_msgs.msg import Path as PathMsg
 from rclpy.serialization import serialize_message
 from rosbags.interfaces import QosDurability
 from rosbags.rosbag2 import Reader
@@ -214,6 +218,53 @@ def test_guidance_status_recorded_by_default_and_replayed(tmp_path, make_node, s
         assert [_fields(m) for m in got] == [_fields(m) for m in recorded]
     finally:
         procs.stop_all()
+
+
+def _path(k: int, poses: int = 2000) -> PathMsg:
+    """The k-th path of a burst (header.stamp.sec = k), `poses` long: big enough that a depth-1
+    writer replaces samples its reader has not acknowledged yet."""
+    msg = PathMsg(poses=[PoseStamped() for _ in range(poses)])
+    msg.header.frame_id, msg.header.stamp.sec = "landing_site", k
+    return msg
+
+
+def test_a_superseded_path_is_counted_not_lost(tmp_path, make_node, spin_until):
+    """A burst on lander/path (PATH_QOS, depth 1) while the recorder is stopped (SIGSTOP): what
+    the writer replaced before delivery is
+    'superseded' in the summary, never LOST, and exit status is 0; recorded + superseded is
+    exactly what was sent after the recorder's first message, and the last path arrives."""
+    bag, sent = tmp_path / "bag", 300
+    procs = ProcessSet(tmp_path)
+    try:
+        rec = _recorder(procs, bag, "/lander/path")
+        node = make_node("path_burst")
+        pub = node.create_publisher(PathMsg, "/lander/path", qos.PATH_QOS)
+        assert spin_until(lambda: pub.get_subscription_count() >= 1, START_S), rec.log()
+        pub.publish(_path(0))
+        assert spin_until(lambda: "first message on /lander/path" in rec.log(), START_S)
+        burst = [_path(k) for k in range(1, sent - 1)]
+        rec.signal_group(signal.SIGSTOP)  # a recorder that cannot keep up: nothing acknowledged
+        try:
+            for msg in burst:
+                pub.publish(msg)
+            spin_until(lambda: False, 0.5)
+        finally:
+            rec.signal_group(signal.SIGCONT)
+        spin_until(lambda: False, 0.5)
+        pub.publish(_path(sent - 1))  # sent to a reader that keeps up: it arrives at once
+        spin_until(lambda: False, 2.0)
+        assert _stop(rec, spin_until, ("SIGINT",)) == 0, rec.log()
+    finally:
+        procs.stop_all()
+    log = rec.log()
+    assert "LOST" not in log and "never reached" not in log, log
+    found = re.search(r"/lander/path: (\d+)(?:, (\d+) superseded)?", log)
+    assert found, log
+    recorded, superseded = int(found.group(1)), int(found.group(2) or 0)
+    assert recorded + superseded == sent and superseded > 0, log
+    paths = deserialize_all(bag)["/lander/path"]
+    assert len(paths) == recorded and paths[-1].header.stamp.sec == sent - 1
+    print(f"{recorded} recorded, {superseded} superseded of {sent}")
 
 
 def _small_bag(path, n: int = 3):
