@@ -7,9 +7,9 @@ Both agents fly the same episodes (episode i on seed s + i), so an episode is a 
 scenario: b = episodes A lands and B does not, c = the reverse, and the two-sided exact sign
 test p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2) (`pd_core.experiments.paired`).
 A cell lists at most 200 failed episodes (`LISTED_FAILURES_JSON`): where a count is larger the
-pairs are incomplete, and the line says so. The last line pools every scenario's pairs;
-given several files (other campaigns, other seeds' picks under the same labels), the
-scenarios are named `file:scenario` and the last line pools them all.
+pairs are incomplete, and the line says so. Several files (other campaigns, other seeds'
+picks under the same labels) name their scenarios `file:scenario`. The last line pools every
+scenario's pairs.
 """
 
 from __future__ import annotations
