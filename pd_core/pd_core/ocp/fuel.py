@@ -48,12 +48,14 @@ def fuel_weights(g: Grid) -> np.ndarray:
     return g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
 
 
-def _floor_rows(pb: Problem, g: Grid, p: np.ndarray, every: int) -> tuple[np.ndarray, np.ndarray]:
+def _floor_rows(
+    pb: Problem, g: Grid, p: np.ndarray, every: int, fl: Flight
+) -> tuple[np.ndarray, np.ndarray]:
     """(rows (m, 6N) per kN, lower bounds (m,)) of z >= 0 at every `every`-th step end and the
-    last 10, linearised at p with the mass frozen: dz_i/du_j = h_j + k_j (t_i - t_j) for j <= i
-    (t: step end times). Eq. 4 has no altitude constraint (Sec. 2.1); a fuel optimum without
-    one can dive below the target and let gravity stop the climb back."""
-    fl = pb.fly(p, g)
+    last 10, linearised at p (flight `fl` = pb.fly(p, g)) with the mass frozen: dz_i/du_j =
+    h_j + k_j (t_i - t_j) for j <= i (t: step end times). Eq. 4 has no altitude constraint
+    (Sec. 2.1); a fuel optimum without one can dive below the target and let gravity stop the
+    climb back."""
     n_steps, n = len(g.dt), pb.n_control
     sel = np.union1d(np.arange(every - 1, n_steps, every), np.arange(max(n_steps - 10, 0), n_steps))
     t_end = np.cumsum(g.dt)
@@ -101,12 +103,12 @@ def envelope_excess(pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope) -> 
 
 
 def _envelope_rows(
-    pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope
+    pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope, fl: Flight
 ) -> tuple[np.ndarray, np.ndarray]:
     """(rows (m, 6N) per kN, lower bounds (m,)) of v_z + v_max(z, m) >= margin (`BrakeEnvelope`)
-    linearised at p: v_z and z are linear in the vertical thrust with the mass frozen
-    (dv_i/du_j = k_j, dz_i/du_j = h_j + k_j (t_i - t_j) for j <= i), v_max in z."""
-    fl = pb.fly(p, g)
+    linearised at p (flight `fl` = pb.fly(p, g)): v_z and z are linear in the vertical thrust
+    with the mass frozen (dv_i/du_j = k_j, dz_i/du_j = h_j + k_j (t_i - t_j) for j <= i), v_max
+    in z."""
     n_steps, n = len(g.dt), pb.n_control
     sel = np.union1d(
         np.arange(env.every - 1, n_steps, env.every), np.arange(max(n_steps - 10, 0), n_steps)
@@ -166,11 +168,12 @@ def fuel_lp_plan(
         ub = ub.reshape(-1)
     lb = np.zeros(6 * n)
     for _ in range(passes):
-        jac, rhs, _ = pb.linearised(p, g)
+        fl = pb.fly(p, g)  # one flight per pass: the Jacobian and both row sets linearise it
+        jac, rhs, _ = pb.linearised(p, g, fl=fl)
         a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n)
         row_hi = None
         if floor_every:
-            rows, lower = _floor_rows(pb, g, p, floor_every)
+            rows, lower = _floor_rows(pb, g, p, floor_every, fl)
             a_eq = np.concatenate([a_eq, rows])
             row_hi = np.concatenate([rhs, np.full(len(lower), np.inf)])
             rhs = np.concatenate([rhs, lower])
@@ -178,7 +181,7 @@ def fuel_lp_plan(
         if envelope is not None:
             # elastic: a slack per row at `elastic_kg_per_mps`, so that a plan outside the
             # envelope (the free-t_f optimum, a state the disturbance pushed out) moves in
-            rows, lower = _envelope_rows(pb, g, p, envelope)
+            rows, lower = _envelope_rows(pb, g, p, envelope, fl)
             k = len(lower)
             if row_hi is None:
                 row_hi = rhs.copy()

@@ -225,15 +225,19 @@ class Problem:
             return float(g.dt @ (fl.u * fl.u).sum(axis=1))
         return fl.fuel
 
-    def gradients(self, p: np.ndarray, g: Grid, sign: float | None = None) -> Gradients:
-        """Objective and terminal state with their exact derivatives in p and t_f.
+    def gradients(
+        self, p: np.ndarray, g: Grid, sign: float | None = None, fl: Flight | None = None
+    ) -> Gradients:
+        """Objective and terminal state with their exact derivatives in p and t_f; `fl`, if
+        given, is `self.fly(p, g)` already computed (callers that need the flight too).
 
         `sign` (+1 or -1) replaces sign(u) = 0 in d|u|/du at the steps whose thrust is exactly 0:
         the one-sided derivatives at the kink of |u| in the mass, for a move of that sign (the
         fuel LP's T+ and T- columns; sign(0) = 0 would drop the mass effect of switching on a
         thrust that is 0 now, and the LP's bang-bang iterates are full of such zeros).
         """
-        fl = self.fly(p, g)
+        if fl is None:
+            fl = self.fly(p, g)
         du, dc_dtf_u, sg, mdot = _terminal_adjoint(fl, g, sign)
         dc_dp = g.wt_mul(du.transpose(1, 0, 2)).transpose(1, 0, 2)
         dudtf = g.interp_dtf(p)
@@ -256,12 +260,13 @@ class Problem:
         return Gradients(j_val, g.wt_mul(dj_du), dj_dtf, c, dc_dp, dc_dtf)
 
     def linearised(
-        self, p: np.ndarray, g: Grid, sign: float | None = None
+        self, p: np.ndarray, g: Grid, sign: float | None = None, fl: Flight | None = None
     ) -> tuple[np.ndarray, np.ndarray, Gradients]:
         """(J (6, 3, N) per kN, rhs (6,)) of c(p) + J (p' - p) = 0 with the exact Jacobian
-        (mass sensitivity included, so a fixed point is the true optimum, not a frozen-mass one).
+        (mass sensitivity included, so a fixed point is the true optimum, not a frozen-mass one);
+        `fl` as in `gradients`.
         """
-        grads = self.gradients(p, g, sign)
+        grads = self.gradients(p, g, sign, fl)
         jac = grads.dc_dp.transpose(0, 2, 1) * KN
         rhs = np.einsum("oan,an->o", jac, p.T / KN) - grads.c
         return jac, rhs, grads
