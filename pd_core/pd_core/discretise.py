@@ -21,13 +21,13 @@ velocities only, so the second pass repeats the first shifted by -x_f until it e
   (0, 6.5, 13 kN) the middle level already decelerates the lander once m < 1747 kg, so when Eq. 5
   drives v_3 to ~0 a few steps before t_f the lander hovers or climbs; under "ocp_time" the
   shifted run then crosses 0.01 m those few steps early, while the lateral channels still carry
-  part of the OCP's final approach, and can miss the 2 m/s limit (33 Table 1 cases at (7, 7, 3),
-  `pd-ocp demos` references: "lowest" 100 % landed, "ocp_time" 93.9 %; paper 81.8 %).
+  part of the OCP's final approach, and can miss the 2 m/s limit (the 33 Table 1 cases at
+  (7, 7, 3), `pd-ocp demos`: docs/experiments/2026-11-21-ocp-and-demonstrations.md).
 * "ocp_time": x_f is the position after the OCP's number of steps. The second pass then ends on
   the ground at that step, unless the shifted trajectory dips below 0.01 m earlier.
 * "touchdown": x_f is where a first pass that stops at the ground first goes below 0.01 m. A
   first pass that ends above the ground hovers (v* is held at 0 after t_f) until the time limit,
-  so this reading fails badly (0 % of the 33 cases).
+  so this reading lands none of the 33 cases.
 
 Other open choices, measured over the Table 5 grid and kept as the literal reading: sgn(0) rounds
 down (no lane hits dv = 0 exactly; "up" gives identical tables); v*_{t+1} indexed by step on the
@@ -36,8 +36,8 @@ at 0 only once t + 1 passes the OCP's end (holding it from an altitude of 5-20 m
 lander hover; measured on the less converged references before the gradient fix).
 `predicted=True` (ours, not the paper's) compares v*_{t+1} with the velocity the optimal thrust
 would give at t + 1, which removes the one-step lead of the literal Eq. 6 (the literal tracker
-holds v_t ~ v*_{t+1}); with the converged references it lands as the literal rule (100 % with
-"lowest", 93.9 % with "ocp_time").
+holds v_t ~ v*_{t+1}); with the converged references it lands the same cases as the literal
+rule.
 
 Episodes end (terminated) at altitude < 0.01 m through `pd_core.env.transition`, without
 disturbance (as the paper), or are cut at MAX_EPISODE_TIME_S.

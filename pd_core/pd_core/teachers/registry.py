@@ -16,11 +16,11 @@ from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController
 
 
 def mpc_controller(objective: str, fallback: Actor) -> MPCController:
-    """The teacher with the RL action set (Sec. 4.1) and the rounding measured best for its
-    objective (8 nominal episodes, bench/mpc_speed.py): the energy plans are smooth, and the
-    reference-carrying Eq. 5 tracks them (fuel 1.16x the fuel optimum, against 1.54x when
-    Eq. 6 is reset every step); the bang-bang fuel plans sit at their thrust limit, where the
-    carried reference lets the lander fall behind (crashes), so "eq5-replan" (1.19x, lands)."""
+    """The teacher with the RL action set (Sec. 4.1) and the rounding chosen per objective
+    (measured in bench/mpc_speed.py, docs/experiments/2026-11-26-fuel-optimal-teacher.md): the
+    energy plans are smooth and the reference-carrying Eq. 5 ("eq5") tracks them; the bang-bang
+    fuel plans sit at their thrust limit, where a carried reference lets the lander fall
+    behind, so the fuel teacher takes its reference from the plan just made ("eq5-replan")."""
     if objective not in ocp.OBJECTIVES:
         raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
     rounding = "eq5" if objective == "energy" else "eq5-replan"
@@ -39,22 +39,21 @@ RESERVE_PARAMS = MPCParams(
 
 def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> MPCController:
     """`mpc-fuel-reserve` (issue 32): the fuel teacher flying its own plans within the runtime
-    layer's vertical reserve. Measured on nominal episodes behind the layer
-    (bench/mpc_diagnose.py, docs/experiments/2026-11-26-fuel-optimal-teacher.md):
+    layer's vertical reserve. Each choice below was measured on nominal episodes behind the
+    layer (bench/mpc_diagnose.py; figures in docs/experiments/2026-11-26-fuel-optimal-teacher.md
+    and 2026-11-26-ocp-student.md):
 
     * plans on 90 % of every axis's thrust (the vertical reserve the braking limit counts on);
-    * quantises to the nearest level ("eq5-replan" rounds every braking step up to full
-      thrust, 1.28x against 1.11x), then raises the vertical level where the layer's braking
-      limit would (`keep_brake_limit`): the layer and the teacher agree, and the layer changes
-      under 1 % of its steps (32 % for `mpc-fuel`);
-    * plans end at rest 0.5 m above the pad (2 m: the fallback's slow final descent costs
-      ~4 % of the fuel), and the t_f search stays (without it 1.22x, 80 % landed);
-    * the fallback lands the last 2 s of the plan (1 s: 6 of 300 nominal episodes land with
-      the lateral speed the plan still had to brake, 2.2-3.4 m/s; 2 s: 1 of 300, 0.6 % more
-      fuel). A lateral reserve (0.7 or 0.8 of the lateral thrust) did not help (3-4 of 300);
+    * quantises to the nearest level ("eq5-replan" rounds every braking step up to full thrust),
+      then raises the vertical level where the layer's braking limit would
+      (`keep_brake_limit`), so the layer and the teacher agree on nearly every step;
+    * plans end at rest 0.5 m above the pad (at 2 m the fallback's slow final descent costs
+      fuel), and the t_f search stays (without it the plans drift from their optimum);
+    * the fallback lands the last 2 s of the plan (with 1 s, some landers touch down with the
+      lateral speed the plan still had to brake);
     * the plans hold the horizontal thrust at 0 over their last 1-2 s (`lateral_settle_s`):
       the horizontal motion ends before the fallback lands the rest, where the fuel optimum
-      braked it last (docs/experiments/2026-11-26-ocp-student.md).
+      braked it last.
     """
     ctl = MPCController(params, fallback)
     ctl.name = "mpc-fuel-reserve"
