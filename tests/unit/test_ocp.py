@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from pd_core import dynamics, ocp
+from pd_core.config import GRAVITY_MPS2
 from pd_core.demonstrations.open_loop import table1_initial_states
+from pd_core.ocp import kernels
+from pd_core.ocp.model import EXHAUST_VELOCITY_MPS, KN, PHI_SERIES
 
 CASES = table1_initial_states()
 
@@ -156,3 +159,39 @@ def test_problem_object_solved_many_times_equals_solve() -> None:
             assert mine.success and ref.success
             assert mine.cost == ref.cost and mine.time_of_flight == ref.time_of_flight
             np.testing.assert_array_equal(mine.thrust, ref.thrust)
+
+
+def test_lp_pass_rows_are_the_exact_jacobian_and_the_altitude_floor() -> None:
+    # One fuel LP pass is one compiled call (`kernels.lp_rows`): its 6 terminal rows are the
+    # exact Jacobian of `Problem.linearised` over the columns [T+, T-] of each axis, and its floor
+    # rows give the flown altitude at p itself and its change to first order with the mass
+    # frozen (the mass effect of 1 N over the flight is a few % of the direct one).
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-3e3, 3e3, (40, 3)) + [0, 0, 8e3]
+    x0, v0, tf = np.array([700.0, -500, 2500]), np.array([-40.0, 10, -80]), 53.37
+    pb = ocp.Problem(x0, v0, 2000.0, "fuel", n_control=40)
+    g = pb.grid(tf)
+    rows, lower, upper = kernels.lp_rows(
+        p, g.j, g.w1, g.dt, g.r, tf, x0, v0, 2000.0, GRAVITY_MPS2, EXHAUST_VELOCITY_MPS, KN,
+        10, PHI_SERIES,
+    )  # fmt: skip
+    n, n_steps = 40, len(g.dt)
+    sel = np.union1d(np.arange(9, n_steps, 10), np.arange(n_steps - 10, n_steps))
+    assert rows.shape == (6 + len(sel), 6 * n)
+    jac, rhs, _ = pb.linearised(p, g)
+    for a in range(3):
+        np.testing.assert_allclose(rows[:6, 2 * a * n : (2 * a + 1) * n], jac[:, a], rtol=1e-12)
+        np.testing.assert_array_equal(
+            rows[:, (2 * a + 1) * n : (2 * a + 2) * n], -rows[:, 2 * a * n : (2 * a + 1) * n]
+        )
+    np.testing.assert_allclose(lower[:6], rhs, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(upper[:6], lower[:6])
+    assert np.all(np.isposinf(upper[6:]))
+    floor = rows[6:, 4 * n : 5 * n]
+    alt = pb.altitudes(pb.fly(p, g), g)
+    np.testing.assert_allclose(floor @ (p[:, 2] / KN) - lower[6:], alt[sel], rtol=1e-12)
+    for k in (5, 20, 39):
+        e = np.zeros_like(p)
+        e[k, 2] = 1.0
+        fd = (pb.altitudes(pb.fly(p + e, g), g) - pb.altitudes(pb.fly(p - e, g), g))[sel] / 2.0
+        np.testing.assert_allclose(floor[:, k] / KN, fd, rtol=0.1, atol=1e-3 * np.abs(fd).max())

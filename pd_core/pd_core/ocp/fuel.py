@@ -19,10 +19,12 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from pd_core.config import GRAVITY_MPS2
+from pd_core.ocp import kernels
 from pd_core.ocp.lp import solve_lp
 from pd_core.ocp.model import (
     EXHAUST_VELOCITY_MPS,
     KN,
+    PHI_SERIES,
     TF_MAX_S,
     TF_MIN_S,
     Flight,
@@ -46,27 +48,6 @@ def fuel_weights(g: Grid) -> np.ndarray:
     """w_k = sum_i dt_i W_ik / (Isp g0) (kg per N of control point k): the fuel of a schedule
     whose adjacent control points share a sign (an upper bound on it otherwise)."""
     return g.wt_mul(g.dt) / EXHAUST_VELOCITY_MPS
-
-
-def _floor_rows(
-    pb: Problem, g: Grid, p: np.ndarray, every: int, fl: Flight
-) -> tuple[np.ndarray, np.ndarray]:
-    """(rows (m, 6N) per kN, lower bounds (m,)) of z >= 0 at every `every`-th step end and the
-    last 10, linearised at p (flight `fl` = pb.fly(p, g)) with the mass frozen: dz_i/du_j =
-    h_j + k_j (t_i - t_j) for j <= i (t: step end times). Eq. 4 has no altitude constraint
-    (Sec. 2.1); a fuel optimum without one can dive below the target and let gravity stop the
-    climb back."""
-    n_steps, n = len(g.dt), pb.n_control
-    sel = np.union1d(np.arange(every - 1, n_steps, every), np.arange(max(n_steps - 10, 0), n_steps))
-    t_end = np.cumsum(g.dt)
-    coef = fl.h[None, :] + fl.k[None, :] * (t_end[sel, None] - t_end[None, :])
-    coef *= np.arange(n_steps)[None, :] <= sel[:, None]
-    c_ctrl = g.wt_mul(coef.T).T * KN  # (m, n_control) per kN of vertical control point
-    rows = np.zeros((len(sel), 6 * n))
-    rows[:, 4 * n : 5 * n] = c_ctrl  # T3+ columns
-    rows[:, 5 * n :] = -c_ctrl  # T3- columns
-    lower = c_ctrl @ (p[:, 2] / KN) - pb.altitudes(fl, g)[sel]
-    return rows, lower
 
 
 @dataclass(frozen=True)
@@ -168,23 +149,17 @@ def fuel_lp_plan(
         ub = ub.reshape(-1)
     lb = np.zeros(6 * n)
     for _ in range(passes):
-        fl = pb.fly(p, g)  # one flight per pass: the Jacobian and both row sets linearise it
-        jac, rhs, _ = pb.linearised(p, g, fl=fl)
-        a_eq = np.concatenate([jac, -jac], axis=2).reshape(6, 6 * n)
-        row_hi = None
-        if floor_every:
-            rows, lower = _floor_rows(pb, g, p, floor_every, fl)
-            a_eq = np.concatenate([a_eq, rows])
-            row_hi = np.concatenate([rhs, np.full(len(lower), np.inf)])
-            rhs = np.concatenate([rhs, lower])
+        # the terminal rows and the floor's, linearised at p in one compiled pass
+        a_eq, rhs, row_hi = kernels.lp_rows(
+            np.ascontiguousarray(p, dtype=float), g.j, g.w1, g.dt, g.r, g.t_f, pb.x0, pb.v0,
+            pb.m0, GRAVITY_MPS2, EXHAUST_VELOCITY_MPS, KN, floor_every, PHI_SERIES,
+        )  # fmt: skip
         cc, lbx, ubx = c, lb, ub
         if envelope is not None:
             # elastic: a slack per row at `elastic_kg_per_mps`, so that a plan outside the
             # envelope (the free-t_f optimum, a state the disturbance pushed out) moves in
-            rows, lower = _envelope_rows(pb, g, p, envelope, fl)
+            rows, lower = _envelope_rows(pb, g, p, envelope, pb.fly(p, g))
             k = len(lower)
-            if row_hi is None:
-                row_hi = rhs.copy()
             a_eq = np.concatenate([a_eq, rows])
             a_eq = np.concatenate([a_eq, np.zeros((len(a_eq), k))], axis=1)
             a_eq[-k:, -k:] = np.eye(k)

@@ -41,7 +41,8 @@ from pd_core.config import (
     OCP_THRUST,
     ThrustLimits,
 )
-from pd_core.dynamics import PHI1, PHI2, horner
+from pd_core.dynamics import PHI1, PHI2
+from pd_core.ocp import kernels
 from pd_core.ocp.request import check_request
 
 EXHAUST_VELOCITY_MPS = ISP_S * G0_MPS2  # Eq. 3
@@ -58,8 +59,8 @@ def _deriv_coeffs(coeffs: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(c * (deg - i) for i, c in enumerate(coeffs[:-1]))
 
 
-_DPHI1 = _deriv_coeffs(PHI1)
-_DPHI2 = _deriv_coeffs(PHI2)
+# the phi series of `pd_core.dynamics` and their derivatives (leading 0), as the kernels take them
+PHI_SERIES = np.array([PHI1, PHI2, (0.0, *_deriv_coeffs(PHI1)), (0.0, *_deriv_coeffs(PHI2))])
 
 
 @dataclass(frozen=True)
@@ -95,27 +96,11 @@ class Grid:
         return Grid(t_f, n_control, dt, t0, r, j, w1, dw1, starts)
 
     def wt_mul(self, v: np.ndarray) -> np.ndarray:
-        """W^T v for step values v (n, ...): the adjoint of `interp`, (n_control, ...).
-
-        Segment sums over the sorted left indices (no BLAS: tiny multithreaded BLAS calls are
-        100x slower on a busy machine).
-        """
-        shape = (-1,) + (1,) * (v.ndim - 1)
-        pad = np.zeros((1,) + v.shape[1:])
-        # A zero row at index n keeps every segment end in range: clipping the starts to n - 1
-        # instead would end the last non-empty segment one step early and drop the last
-        # (partial) step from the gradient of its two control points.
-        a = np.concatenate([(1.0 - self.w1).reshape(shape) * v, pad])
-        b = np.concatenate([self.w1.reshape(shape) * v, pad])
-        n = len(self.dt)
-        empty = np.diff(np.append(self.starts, n)) == 0
-        sa = np.add.reduceat(a, self.starts, axis=0)
-        sb = np.add.reduceat(b, self.starts, axis=0)
-        sa[empty] = 0.0
-        sb[empty] = 0.0
-        out = sa
-        out[1:] += sb[:-1]
-        return out
+        """W^T v for step values v (n, ...): the adjoint of `interp`, (n_control, ...)
+        (`kernels.wt_mul`: segment sums over the sorted left indices, no BLAS)."""
+        flat = np.ascontiguousarray(v, dtype=float).reshape(len(self.dt), -1)
+        out = kernels.wt_mul(self.j, self.w1, self.n_control, flat)
+        return out.reshape((self.n_control,) + v.shape[1:])
 
     def hessian_diagonals(self) -> tuple[np.ndarray, np.ndarray]:
         """(main, upper) diagonals of Q = W^T diag(dt) W: sum_i dt_i |u_i|^2 = sum_a p_a^T Q p_a.
@@ -129,7 +114,7 @@ class Grid:
 
     def interp(self, p: np.ndarray) -> np.ndarray:
         """Step thrusts (n, 3) from control points (n_control, 3)."""
-        return (1.0 - self.w1)[:, None] * p[self.j] + self.w1[:, None] * p[self.j + 1]
+        return kernels.interp(np.ascontiguousarray(p, dtype=float), self.j, self.w1)
 
     def interp_dtf(self, p: np.ndarray) -> np.ndarray:
         """d(step thrusts)/d t_f at fixed control points."""
@@ -199,25 +184,15 @@ class Problem:
     def fly(self, p: np.ndarray, g: Grid) -> Flight:
         """Closed-form flight of control points p (n_control, 3) N over grid g."""
         u = g.interp(p)
-        burn = np.abs(u).sum(axis=1) * g.dt / EXHAUST_VELOCITY_MPS
-        cum = np.cumsum(burn)
-        m = self.m0 - np.concatenate(([0.0], cum[:-1]))
-        z = burn / m
-        k = g.dt / m * horner(PHI1, z)
-        h = g.dt * g.dt / m * horner(PHI2, z)
-        t_f = g.t_f
-        vf = self.v0 + GRAVITY_MPS2 * t_f + k @ u
-        xf = self.x0 + self.v0 * t_f + 0.5 * GRAVITY_MPS2 * t_f**2 + (k * g.r + h) @ u
-        return Flight(u, m, z, k, h, xf, vf, float(cum[-1]))
+        m, z, k, h, fuel = kernels.flight(u, g.dt, self.m0, EXHAUST_VELOCITY_MPS, PHI_SERIES)
+        c = kernels.final_state(u, k, h, g.r, g.t_f, self.x0, self.v0, GRAVITY_MPS2)
+        return Flight(u, m, z, k, h, c[0:3], c[3:6], fuel)
 
     def altitudes(self, fl: Flight, g: Grid) -> np.ndarray:
         """Altitude (m) at the end of every step of a flight: Eq. 4 has no altitude constraint
         (Sec. 2.1), so a plan may pass below the ground; callers that fly it check this."""
         gz = float(GRAVITY_MPS2[2])
-        dv = gz * g.dt + fl.k * fl.u[:, 2]
-        v_start = self.v0[2] + np.concatenate(([0.0], np.cumsum(dv)[:-1]))
-        dz = g.dt * v_start + 0.5 * gz * g.dt**2 + fl.h * fl.u[:, 2]
-        return self.x0[2] + np.cumsum(dz)
+        return kernels.altitudes(fl.u, fl.k, fl.h, g.dt, self.x0[2], self.v0[2], gz)
 
     def cost(self, fl: Flight, g: Grid) -> float:
         """Objective of a flight: N^2 s ("energy") or kg ("fuel")."""
@@ -238,10 +213,21 @@ class Problem:
         """
         if fl is None:
             fl = self.fly(p, g)
-        du, dc_dtf_u, sg, mdot = _terminal_adjoint(fl, g, sign)
-        dc_dp = g.wt_mul(du.transpose(1, 0, 2)).transpose(1, 0, 2)
+        du, dc_dtf_u, sg, mdot = kernels.terminal_adjoint(
+            fl.u,
+            fl.m,
+            fl.z,
+            fl.k,
+            fl.h,
+            g.dt,
+            g.r,
+            math.nan if sign is None else sign,
+            EXHAUST_VELOCITY_MPS,
+            PHI_SERIES,
+        )
+        dc_dp = g.wt_mul(du).transpose(1, 0, 2)
         dudtf = g.interp_dtf(p)
-        dc_dtf = np.einsum("oib,ib->o", du, dudtf) + dc_dtf_u
+        dc_dtf = np.einsum("iob,ib->o", du, dudtf) + dc_dtf_u
         dr = np.ones_like(g.r)
         dr[-1] = 0.0
         dc_dtf[0:3] += self.v0 + GRAVITY_MPS2 * g.t_f + (fl.k * dr) @ fl.u
@@ -274,42 +260,6 @@ class Problem:
     def simulate(self, thrust_n: np.ndarray, t_f: float) -> tuple[np.ndarray, np.ndarray]:
         """(states (n+1, 7), times (n+1,)) of control points re-flown with `step_scalar`."""
         return fly(self.x0, self.v0, self.m0, thrust_n, t_f)
-
-
-def _terminal_adjoint(
-    fl: Flight, g: Grid, sign: float | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(dc/du (6, n, 3), the t_f derivative through the last step's gains (6,), sign(u), mdot).
-
-    Reverse mode by hand: each output depends on u_i directly through the gains and indirectly
-    through the mass of every later step (m_l = m0 - sum_{j<l} burn_j), a reverse cumulative sum.
-    """
-    u, m, z, k, h, dt, r = fl.u, fl.m, fl.z, fl.k, fl.h, g.dt, g.r
-    c_e = EXHAUST_VELOCITY_MPS
-    mdot = np.abs(u).sum(axis=1) / c_e
-    p1d = horner(_DPHI1, z)
-    p2d = horner(_DPHI2, z)
-    dk_dmdot = dt * dt / (m * m) * p1d
-    dh_dmdot = dt**3 / (m * m) * p2d
-    dk_dm = -(k + dt * p1d * z / m) / m
-    dh_dm = -(h + dt * dt * p2d * z / m) / m
-    gk = np.concatenate([u.T * r, u.T])  # adjoint of k_i for outputs x_f (3), v_f (3)
-    gh = np.concatenate([u.T, np.zeros_like(u.T)])
-    a_adj = gk * dk_dmdot + gh * dh_dmdot
-    b_adj = gk * dk_dm + gh * dh_dm
-    later = np.cumsum(b_adj[:, ::-1], axis=1)[:, ::-1] - b_adj  # sum over later steps
-    mdot_adj = a_adj - dt * later
-    sg = np.sign(u) if sign is None else np.where(u == 0.0, sign, np.sign(u))
-    du = (mdot_adj / c_e)[:, :, None] * sg[None]
-    cx = k * r + h
-    for a in range(3):
-        du[a, :, a] += cx
-        du[3 + a, :, a] += k
-    # t_f also changes the length of the last step, hence its gains
-    mm, zz, dtl = m[-1], z[-1], dt[-1]
-    dk_ddt = horner(PHI1, zz[None])[0] / mm + dtl / mm * p1d[-1] * mdot[-1] / mm
-    dh_ddt = 2 * dtl * horner(PHI2, zz[None])[0] / mm + dtl**2 / mm * p2d[-1] * mdot[-1] / mm
-    return du, gk[:, -1] * dk_ddt + gh[:, -1] * dh_ddt, sg, mdot
 
 
 def fly(
