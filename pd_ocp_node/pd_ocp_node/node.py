@@ -43,6 +43,7 @@ from rclpy.node import Node
 from pd_core import ocp
 from pd_core.config import OCP_CONTROL_POINTS
 from pd_core.discretise import discretise
+from pd_core.ocp import kernels
 from pd_interfaces.srv import ComputeTrajectory
 from pd_ros_common import diagnostics, names, params, qos
 from pd_ros_common.convert import fill_ocp_response, from_vec3, plan_path_msg, vec3
@@ -93,9 +94,11 @@ CHECKS: dict[str, params.Check] = {
 
 def _warm_up() -> None:
     """Solver process initialiser. Unpickling it imports this module, and with it pd_core.ocp,
-    in the solver process when the pool starts, not on the first request. Ctrl-C reaches the
-    whole process group: the node stops its solver itself, so the solver ignores SIGINT."""
+    in the solver process when the pool starts, not on the first request, and it loads the
+    solvers' compiled kernels (`pd_core.ocp.kernels.warm_up`). Ctrl-C reaches the whole process
+    group: the node stops its solver itself, so the solver ignores SIGINT."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    kernels.warm_up()
 
 
 def _solver_pool() -> ProcessPoolExecutor:

@@ -264,3 +264,17 @@ def lp_rows(
         upper[6 + col] = np.inf
         col += 1
     return rows, lower, upper
+
+
+def warm_up() -> None:
+    """Compile every kernel (or load it from numba's cache) now, on a two-step flight: a
+    process that serves solves (the OCP node's solver) pays it at start, not in its first
+    request's time limit."""
+    p = np.zeros((2, 3))
+    j, w1 = np.zeros(2, dtype=np.int64), np.full(2, 0.5)
+    dt, r, x = np.full(2, 0.2), np.array([0.2, 0.0]), np.zeros(3)
+    phi = np.zeros((4, 9))
+    phi[:, -1] = 1.0
+    lp_rows(p, j, w1, dt, r, 0.4, x, x, 1000.0, x, 2000.0, 1e3, 1, phi)
+    m, z, k, h, _ = flight(p, dt, 1000.0, 2000.0, phi)
+    terminal_adjoint(p, m, z, k, h, dt, r, 1.0, 2000.0, phi)
