@@ -28,24 +28,12 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision, Decisions
-from pd_core.runtime.kernels import states_valid
 from pd_core.runtime.latency import LatencyCompensator
+from pd_core.runtime.network import observed_states
 from pd_core.runtime.rules import decide, rule_settings
-from pd_core.state import MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG, check_state
 from pd_core.teachers.zemzev import ZemZevController
 
 _ROW0 = np.zeros(1, dtype=np.int64)
-_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
-
-
-def _observed(states: np.ndarray) -> np.ndarray:
-    """States (B, 7) as floats, or `check_state`'s ValueError saying what is wrong with them."""
-    s = np.asarray(states, dtype=float)
-    if s.shape[-1:] == (7,):
-        s = np.ascontiguousarray(s.reshape(-1, 7))
-        if states_valid(s, _LIMITS):
-            return s
-    return check_state(states).reshape(-1, 7)
 
 
 def _warm_up(fallback: ZemZevController) -> None:
@@ -58,7 +46,7 @@ def _warm_up(fallback: ZemZevController) -> None:
     s = np.array([[0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0]])
     rows = np.zeros(1, dtype=np.int64)
     lat = LatencyCompensator(LatencyConfig(), NavFilterConfig())
-    lat.predict(_observed(s), rows)
+    lat.predict(observed_states(s), rows)
     scale = lat.vertical_thrust_scale(rows)
     lat.record(rows, np.zeros((1, 3)))
     decide(rule_settings(RulesConfig(), DEFAULT_ACTIONS), rows, s, fallback, scale)
@@ -109,7 +97,7 @@ class Runtime:
 
     def step_rows(self, states: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, Decisions]:
         """(actions (B,), their decisions) for the observed states (B, 7) of rows (B,)."""
-        observed = _observed(states)
+        observed = observed_states(states)
         rows = np.asarray(rows, dtype=np.int64)
         lat = self.latency
         if lat is None:
@@ -147,7 +135,7 @@ class Runtime:
     def bare_action(self, observation: np.ndarray) -> int:
         """The network's (or controller's) own action on an observed state (7,): no prediction,
         no rule, no memory. Not what flies."""
-        return int(self.actor.act_batch(check_state(observation).reshape(1, 7))[0])
+        return int(self.actor.act_batch(observed_states(observation))[0])
 
     def thrust(self, action: int) -> np.ndarray:
         """Thrust (3,) in N of an action index; ValueError if out of range."""
