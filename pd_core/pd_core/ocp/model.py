@@ -75,7 +75,6 @@ class Grid:
     j: np.ndarray  # (n,) left control point of each step's midpoint
     w1: np.ndarray  # (n,) weight of the right control point
     dw1: np.ndarray  # (n,) d w1 / d t_f
-    starts: np.ndarray  # (n_control,) first step whose left control point is k (or n)
 
     @staticmethod
     def make(t_f: float, n_control: int, dt_s: float = DT_S) -> Grid:
@@ -92,12 +91,11 @@ class Grid:
         dw1 = (n_control - 1) * (dmid * t_f - mid) / t_f**2
         r = t_f - (t0 + dt)
         r[-1] = 0.0
-        starts = np.searchsorted(j, np.arange(n_control))
-        return Grid(t_f, n_control, dt, t0, r, j, w1, dw1, starts)
+        return Grid(t_f, n_control, dt, t0, r, j, w1, dw1)
 
     def wt_mul(self, v: np.ndarray) -> np.ndarray:
         """W^T v for step values v (n, ...): the adjoint of `interp`, (n_control, ...)
-        (`kernels.wt_mul`: segment sums over the sorted left indices, no BLAS)."""
+        (`kernels.wt_mul`: sums by left control point, no BLAS)."""
         flat = np.ascontiguousarray(v, dtype=float).reshape(len(self.dt), -1)
         out = kernels.wt_mul(self.j, self.w1, self.n_control, flat)
         return out.reshape((self.n_control,) + v.shape[1:])
