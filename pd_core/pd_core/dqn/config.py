@@ -259,12 +259,14 @@ PRESETS["ocp"] = {
 }
 
 # Ours for issue 32: DAgger after `ocp` (needs --init-policy, the `ocp` run's best.pt). Each
-# round the current network flies 500 new `standard` episodes behind its layer (a random action
+# round the current network flies 500 new `broad` episodes behind its layer (a random action
 # on 10 % of its steps), mpc-fuel-reserve labels every state it decides on, the labels join all
 # earlier ones (aggregated) and 20k pre-training updates follow; 500 more teacher episodes at
-# the start; no interaction phase.
+# the start; no interaction phase. `broad` rather than `standard` for the demonstrations, the
+# rounds and the selection (docs/experiments/2026-11-28-dagger-under-broad.md).
 PRESETS["ocp-dagger"] = {
     **PRESETS["ocp"],
+    "dispersions": "broad",
     "controller_demo_episodes": 500,
     "label_episodes": 500,
     # the teacher also labels recoveries from the student's errors (noise injection, measured
