@@ -11,14 +11,15 @@
 # With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
 # mpc-fuel-reserve, from scratch, behind the runtime layer:
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction; 201,000
-#      gradient updates, evaluated every 10,000 (about 30 min here);
+#      gradient updates, evaluated every 10,000 (30 min on the machine of 11-27, 62.5 min on
+#      that of 11-29);
 #   2. `ocp-dagger` preset from stage 1's best.pt, under the `broad` dispersions: 500 teacher
 #      episodes, then seven DAgger rounds (the initial network's and six more), each 500 new
 #      episodes flown by the current network and labelled by the teacher, aggregated, 20k
-#      pre-training updates after each; no interaction (about 35 min on the machine of 11-27,
-#      72 min on that of 11-29). Both stages are budgeted by updates,
-#      not wall time, so a seed's file does not depend on the machine's speed or load. The
-#      recipe's policy is stage 2's best.pt (models/pd_dqn_ocp.pt for seed 1).
+#      pre-training updates after each; no interaction (35 min on 11-27, 66 min on 11-29).
+#      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
+#      on the machine's speed or load. The recipe's policy is stage 2's best.pt
+#      (models/pd_dqn_ocp.pt for seed 1).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator, with --teacher ocp):
