@@ -62,13 +62,14 @@ def implementation(rt: Runtime, load_s: float) -> str:
             kernels_latency,
             kernels_nav,
             kernels_rules,
+            kernels_step,
         )
     except ImportError:  # a tree from before the kernels
         layer = "runtime layer numpy"
     else:
         compiled = sorted(
             name
-            for module in (kernels, kernels_latency, kernels_nav, kernels_rules)
+            for module in (kernels, kernels_latency, kernels_nav, kernels_rules, kernels_step)
             for name, f in vars(module).items()
             if getattr(f, "signatures", None)
         )

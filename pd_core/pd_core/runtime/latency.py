@@ -31,16 +31,19 @@ from pd_core.runtime.config import LatencyConfig, NavFilterConfig
 from pd_core.runtime.kernels import consts
 from pd_core.runtime.kernels_latency import (
     lag_residuals_rows,
-    predict_rows,
     record_rows,
     thrust_scale_rows,
     window_bounds,
 )
+from pd_core.runtime.kernels_step import INVALID, JUMPED, before_actor
 from pd_core.runtime.navfilter import NavFilter
 from pd_core.runtime.rowmemory import RowMemory
+from pd_core.state import MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG, check_state
 
 _CONSTS = consts()
 _IDENTITY = np.eye(3)[None, None]
+_NONE_ENGAGED = np.zeros(0, dtype=bool)
+_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
 
 
 def lag_residuals(
@@ -120,6 +123,7 @@ class LatencyCompensator(RowMemory):
         super().reset(n_rows)
         if self.nav is not None:
             self.nav.reset(n_rows)
+        self._memory: tuple | None = None
 
     def _fresh(self, n_rows: int) -> dict[str, np.ndarray]:
         """The memory of n_rows landers that have flown nothing yet."""
@@ -143,9 +147,24 @@ class LatencyCompensator(RowMemory):
         }
 
     def grow(self, n_rows: int) -> None:
+        if n_rows <= self.n_rows:
+            return
         super().grow(n_rows)
         if self.nav is not None:
             self.nav.grow(n_rows)
+        self._memory = None
+
+    def _kernel_memory(self) -> tuple:
+        """The memory and settings `predict_rows` takes after its first four arguments, in its
+        order (kept until `reset` or `grow` replace the arrays; `clear` writes into them)."""
+        if self._memory is None:
+            nav = self._no_nav if self.nav is None else self.nav.state()
+            self._memory = (
+                self._issued, self._last, self._score, self.delay_steps, self.gain, self._cov,
+                self.force_noise_var, self._win, self._win_steps, self._win_sums, self._params,
+                self.nav is not None, *nav,
+            )  # fmt: skip
+        return self._memory
 
     def clear(self, rows: np.ndarray) -> None:
         super().clear(rows)
@@ -155,23 +174,48 @@ class LatencyCompensator(RowMemory):
     def predict(self, observed: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """States (B, 7) the next commands of rows (B,) will meet, given their observed states
         (B, 7); updates each row's lag estimate with the velocity change it just saw. A row
-        observed more than `jump_m` from where it was heading starts a new episode (cleared)."""
+        observed more than `jump_m` from where it was heading starts a new episode (cleared).
+        ValueError (`check_state`'s) where an observed state is invalid."""
+        return self.predict_scaled(observed, rows)[0]
+
+    def predict_scaled(
+        self, observed: np.ndarray, rows: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(`predict`, then `vertical_thrust_scale`) of rows (B,) in one compiled call
+        (`kernels_step.before_actor`), the observed states validated first."""
         rows = np.asarray(rows, dtype=np.int64)
-        obs = np.ascontiguousarray(observed, dtype=float).reshape(-1, 7)
-        self.grow(int(rows.max()) + 1 if len(rows) else 0)
+        obs = np.asarray(observed, dtype=float)
+        if obs.shape[-1:] != (7,):
+            check_state(obs)
+        obs = np.ascontiguousarray(obs.reshape(-1, 7))
+        top = int(rows.max()) + 1 if len(rows) else 0
+        if top > self.n_rows:
+            self.grow(top)
         if self.max_delay_steps == 0 and self.nav is None:
+            check_state(obs)
             self._last[rows] = obs
-            return obs
+            return obs, np.ones(len(rows))
         out = np.empty_like(obs)
+        scale = np.empty(len(rows))
         jumped = np.empty(len(rows), dtype=bool)
-        nav = self._no_nav if self.nav is None else self.nav.state()
-        while not predict_rows(
-            rows, obs, out, jumped, self._issued, self._last, self._score, self.delay_steps,
-            self.gain, self._cov, self.force_noise_var, self._win, self._win_steps,
-            self._win_sums, self._params, self.nav is not None, *nav,
-        ):  # fmt: skip
+        want_scale = self.max_delay_steps > 0 and self.thrust_model  # (as vertical_thrust_scale)
+        while True:
+            code = before_actor(
+                obs, _LIMITS, rows, out, jumped, scale, want_scale, self.cfg.shortfall_sd,
+                *self._window, *self._kernel_memory(),
+            )  # fmt: skip
+            if code == INVALID:
+                check_state(observed)
+            if code != JUMPED:
+                return out, scale
             self.clear(rows[jumped])
-        return out
+
+    def pipeline(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """(issued commands (rows, lags, 3), the lag each row flies (rows,), the navigation
+        filter engaged (rows,), whether there is a filter): the arrays
+        `kernels_step.after_actor` records into and reads (the memory, not copies)."""
+        engaged = _NONE_ENGAGED if self.nav is None else self.nav.engaged
+        return self._issued, self.delay_steps, engaged, self.nav is not None
 
     def vertical_thrust_scale(self, rows: np.ndarray, n_sd: float | None = None) -> np.ndarray:
         """(B,) delivered over commanded vertical thrust of rows (B,) as far as the evidence

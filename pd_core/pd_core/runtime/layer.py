@@ -16,7 +16,7 @@ A `Runtime` built with `RuntimeConfig.off()` flies the actor alone. The node, `p
 campaigns and tests all fly a policy file through this class (`load_policy`); `bare_action` is
 the network alone and says so. Imports numpy, and numba for the layer's compiled arithmetic
 (`pd_core.runtime.kernels`, compiled or loaded from numba's cache once per process when the
-first `Runtime` is built).
+first `Runtime` is built): steps 1 and 3-4 are one compiled call each (`kernels_step`).
 """
 
 from __future__ import annotations
@@ -28,12 +28,17 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision, Decisions
+from pd_core.runtime.kernels_step import after_actor
 from pd_core.runtime.latency import LatencyCompensator
-from pd_core.runtime.network import observed_states
-from pd_core.runtime.rules import decide, rule_settings
+from pd_core.runtime.network import NumpyQNetwork, observed_states
+from pd_core.runtime.rules import RuleSettings, rule_settings
 from pd_core.teachers.zemzev import ZemZevController
 
 _ROW0 = np.zeros(1, dtype=np.int64)
+_NO_SCALE = np.ones(0)
+_NO_ISSUED = np.zeros((0, 1, 3))
+_NO_DELAY = np.zeros(0, dtype=np.int64)
+_NO_ENGAGED = np.zeros(0, dtype=bool)
 
 
 def _warm_up(fallback: ZemZevController) -> None:
@@ -46,11 +51,48 @@ def _warm_up(fallback: ZemZevController) -> None:
     s = np.array([[0.0, 0.0, 1000.0, 0.0, 0.0, -50.0, 2000.0]])
     rows = np.zeros(1, dtype=np.int64)
     lat = LatencyCompensator(LatencyConfig(), NavFilterConfig())
-    lat.predict(observed_states(s), rows)
-    scale = lat.vertical_thrust_scale(rows)
-    lat.record(rows, np.zeros((1, 3)))
-    decide(rule_settings(RulesConfig(), DEFAULT_ACTIONS), rows, s, fallback, scale)
+    decided, scale = lat.predict_scaled(s, rows)
+    proposed = np.zeros(1, dtype=np.int64)
+    settings = rule_settings(RulesConfig(), DEFAULT_ACTIONS)
+    for memory in (lat, None):
+        rules_and_record(settings, fallback, proposed, decided, scale, rows, memory)
+    tiny = {"net.0.weight": np.zeros((1, 13)), "net.0.bias": np.zeros(1)}
+    NumpyQNetwork(tiny, np.ones(7), near_pad=True).act_batch(s)
     _WARM = True
+
+
+def rules_and_record(
+    settings: RuleSettings,
+    fallback: ZemZevController,
+    proposed: np.ndarray,
+    decided: np.ndarray,
+    scale: np.ndarray,
+    rows: np.ndarray,
+    memory: LatencyCompensator | None,
+) -> tuple[np.ndarray, Decisions]:
+    """`pd_core.runtime.rules.decide` on the actions proposed (B,) for the states decided on
+    (B, 7) of rows (B,), counting on the vertical thrust scale (B,) (ignored without memory),
+    and `memory.record` of the actions flown (if memory): one compiled call
+    (`kernels_step.after_actor`), two where the fallback takes over a row."""
+    n = len(proposed)
+    actions = np.empty(n, dtype=np.int64)
+    hand = np.empty(n, dtype=bool)
+    source = np.empty(n, dtype=np.uint8)
+    frac = np.empty(n)
+    delay = np.empty(n, dtype=np.int64)
+    nav = np.empty(n, dtype=bool)
+    if memory is None:
+        kept = (False, rows, _NO_ISSUED, _NO_DELAY, _NO_ENGAGED, False)
+    else:
+        kept = (True, rows, *memory.pipeline())
+    r = settings
+    tail = (r.level_table, r.table_n, r.n_per_axis, r.hi, r.params, *kept, delay, nav)
+    has_scale = memory is not None
+    head = (proposed, decided, scale, has_scale)
+    if not after_actor(*head, False, actions, hand, source, frac, *tail):
+        actions[hand] = fallback.act_batch(decided[hand])
+        after_actor(*head, True, actions, hand, source, frac, *tail)
+    return actions, Decisions(actions, proposed, source, delay, frac, nav)
 
 
 _WARM = False
@@ -96,31 +138,29 @@ class Runtime:
         self.begin_episodes(1)
 
     def step_rows(self, states: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, Decisions]:
-        """(actions (B,), their decisions) for the observed states (B, 7) of rows (B,)."""
-        observed = observed_states(states)
+        """(actions (B,), their decisions) for the observed states (B, 7) of rows (B,).
+
+        Three calls: the prediction stage (`LatencyCompensator.predict_scaled`, one compiled
+        call), the actor, and the rules with the pipeline's record (`rules_and_record`)."""
         rows = np.asarray(rows, dtype=np.int64)
         lat = self.latency
         if lat is None:
-            decided, scale = observed, None
+            decided, scale = observed_states(states), _NO_SCALE
         else:
-            decided = lat.predict(observed, rows)
-            scale = lat.vertical_thrust_scale(rows)
-        proposed = np.asarray(self.actor.act_batch(decided), dtype=np.int64).reshape(-1)
-        actions, source, frac = decide(self._rules, proposed, decided, self.fallback, scale)
-        n = len(rows)
-        if lat is None:
-            delay, nav = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
-        else:
-            lat.record(rows, self._rules.table_n[actions])
-            delay = lat.delay_steps[rows]
-            nav = np.zeros(n, dtype=bool) if lat.nav is None else lat.nav.engaged[rows]
+            decided, scale = lat.predict_scaled(states, rows)
+        proposed = np.ascontiguousarray(self.actor.act_batch(decided), dtype=np.int64).reshape(-1)
+        actions, decisions = rules_and_record(
+            self._rules, self.fallback, proposed, decided, scale, rows, lat
+        )
+        source = decisions.source
+        n = len(actions)
         counts = self.counts
         if n == 1:
             counts[SOURCES[source[0]]] += 1
         else:
             for k, c in enumerate(np.bincount(source, minlength=len(SOURCES)).tolist()):
                 counts[SOURCES[k]] += c
-        return actions, Decisions(actions, proposed, source, delay, frac, nav)
+        return actions, decisions
 
     def act_rows(self, states: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Actions (B,) for the observed states (B, 7) of rows (B,) (`step_rows` without the

@@ -8,27 +8,35 @@ from collections.abc import Mapping
 import numpy as np
 
 from pd_core.runtime.kernels import states_valid
+from pd_core.runtime.kernels_step import network_inputs
 from pd_core.state import (
     MAX_ABS_POSITION_M,
     MAX_ABS_VELOCITY_MPS,
     MAX_MASS_KG,
+    NEAR_PAD_GAIN,
     check_state,
-    near_pad_features,
 )
 
 _LAYER = re.compile(r"^net\.(\d+)\.(weight|bias)$")
 _LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
+_NO_GAIN = np.zeros(0)
+
+
+def _as_rows(states: np.ndarray) -> np.ndarray:
+    """States (B, 7) as contiguous floats, or `check_state`'s ValueError on their shape."""
+    s = np.asarray(states, dtype=float)
+    if s.shape[-1:] != (7,):
+        check_state(s)
+    return np.ascontiguousarray(s.reshape(-1, 7))
 
 
 def observed_states(states: np.ndarray) -> np.ndarray:
     """States (B, 7) as floats, or `check_state`'s ValueError saying what is wrong with them:
     the compiled check (`kernels.states_valid`) first, `check_state`'s message only when it
     fails (a decision pays microseconds, not `check_state`'s dozen numpy calls)."""
-    s = np.asarray(states, dtype=float)
-    if s.shape[-1:] == (7,):
-        s = np.ascontiguousarray(s.reshape(-1, 7))
-        if states_valid(s, _LIMITS):
-            return s
+    s = _as_rows(states)
+    if states_valid(s, _LIMITS):
+        return s
     return check_state(states).reshape(-1, 7)
 
 
@@ -61,15 +69,23 @@ class NumpyQNetwork:
         ]
         self.scale = np.asarray(state_scale, dtype=float)
         self.near_pad = near_pad
+        self._near_gain = NEAR_PAD_GAIN if near_pad else _NO_GAIN
         self.activation = activation
         self.n_actions = self.layers[-1][1].shape[0]
 
     def q_values(self, states: np.ndarray) -> np.ndarray:
-        """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid."""
-        h = observed_states(states) * self.scale
-        if self.near_pad:
-            h = np.concatenate([h, near_pad_features(h)], axis=-1)
-        h = h.astype(self.dtype)
+        """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid. The
+        inputs (scaling, validation and the near-pad features' arguments) are one compiled
+        call (`kernels_step.network_inputs`); the tanh and the layers are numpy's."""
+        s = _as_rows(states)
+        b, k = len(s), len(self._near_gain)
+        scaled, near = np.empty((b, 7)), np.empty((b, k))
+        if not network_inputs(s, _LIMITS, self.scale, self._near_gain, scaled, near):
+            check_state(states)
+        h = np.empty((b, 7 + k), dtype=self.dtype)
+        h[:, :7] = scaled
+        if k:
+            h[:, 7:] = np.tanh(near)
         last = len(self.layers) - 1
         for i, (w, b) in enumerate(self.layers):
             h = h @ w
@@ -80,4 +96,4 @@ class NumpyQNetwork:
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         """Greedy actions (B,) of physical states (B, 7): the network alone."""
-        return np.argmax(self.q_values(states), axis=-1)
+        return self.q_values(states).argmax(axis=-1)
