@@ -2,7 +2,8 @@
 ZEM/ZEV, per decision and per campaign, side by side in one run, with the ratios.
 
 1. One decision of one lander (`Runtime.step`, the policy node's call) with the full layer,
-   median and p99 over a flown nominal episode replayed many times, beside a bare float32
+   median and p99 over a flown nominal episode replayed many times in `--rounds` rounds that
+   interleave the agents (and the spread of the rounds' medians), beside a bare float32
    forward of the same network (`NumpyQNetwork.act_batch` on one state), ZEM/ZEV and the
    optimal-control teacher `mpc-fuel-reserve` behind the same layer (a warm re-plan a step).
 2. A one-process nominal campaign (`pd_core.experiments.campaign.run_campaign`, 1024 landers
@@ -12,7 +13,8 @@ BLAS and numba are held to one thread: "one process" is one core. The first line
 implementation ran (the layer's compiled kernels, `pd_core.runtime.kernels`, and the network's
 forward) and what loading the file cost (weights, and the kernels from numba's cache or compiled).
 
-    python bench/runtime_speed.py [--episodes 4096] [--decisions 5000] [--policy FILE.pt]
+    python bench/runtime_speed.py [--episodes 4096] [--decisions 5000] [--rounds 5]
+                                  [--policy FILE.pt]
 """
 
 from __future__ import annotations
@@ -84,6 +86,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--episodes", type=int, default=4096, help="campaign episodes per agent")
     ap.add_argument("--decisions", type=int, default=5000, help="timed single decisions")
+    ap.add_argument("--rounds", type=int, default=5, help="interleaved rounds of the decisions")
     ap.add_argument("--policy", default=str(SHIPPED), help="policy file (default: the shipped one)")
     args = ap.parse_args()
     policy = Path(args.policy)
@@ -93,7 +96,7 @@ def main() -> None:
     load_s = time.perf_counter() - t0
     print(implementation(rt, load_s) + "\n")
     path = rollout(rt, 1, 0, keep_trajectories=1).trajectories[0][:-1]  # one nominal flight
-    repeats = max(1, args.decisions // len(path))
+    repeats = max(1, args.decisions // (len(path) * args.rounds))
     zz = Runtime(make_controller("zemzev-vernier"), RuntimeConfig.off())
     teacher = Runtime(make_controller("mpc-fuel-reserve"), RuntimeConfig())
 
@@ -105,26 +108,35 @@ def main() -> None:
 
     episode_start()
     per_decision_us(layer_step, path[:20], 1)  # warm-up (and any compilation)
-    timings = {}
-    for name, call in (
+    calls = (
         (f"{policy.stem}, full runtime layer (Runtime.step)", layer_step),
         ("bare float32 forward (NumpyQNetwork, 1 state)", lambda s: rt.actor.act_batch(s[None])),
         ("ZEM/ZEV-vernier (1 state)", lambda s: zz.step(s)),
-    ):
-        episode_start()
-        timings[name] = per_decision_us(call, path, repeats)
+    )
+    # rounds interleave the agents, so a machine that slows down for a minute slows all of
+    # them: each round flies the path `repeats` times per agent; the spread of the rounds'
+    # medians says how steady the machine was
+    timings: dict[str, list[np.ndarray]] = {name: [] for name, _ in calls}
+    for _ in range(args.rounds):
+        for name, call in calls:
+            episode_start()
+            timings[name].append(per_decision_us(call, path, repeats))
     # the optimal-control teacher re-plans every step: one pass of the flight (its first
     # decision is a cold solve, in the p99)
     teacher.begin_episode()
-    timings["mpc-fuel-reserve teacher, full runtime layer"] = per_decision_us(
-        lambda s: teacher.step(s), path, 1
-    )
-    base = np.median(timings["bare float32 forward (NumpyQNetwork, 1 state)"])
-    print("one decision (one core):")
-    print(f"  {'':<52}{'calls':>7}{'median us':>10}{'p99 us':>10}{'x bare':>9}")
-    for name, t in timings.items():
+    timings["mpc-fuel-reserve teacher, full runtime layer"] = [
+        per_decision_us(lambda s: teacher.step(s), path, 1)
+    ]
+    base = np.median(np.concatenate(timings["bare float32 forward (NumpyQNetwork, 1 state)"]))
+    print(f"one decision (one core; {args.rounds} rounds, agents interleaved):")
+    head = f"  {'':<52}{'calls':>7}{'median us':>10}{'p99 us':>10}{'x bare':>9}"
+    print(head + f"{'rounds us':>16}")
+    for name, parts in timings.items():
+        t = np.concatenate(parts)
         med, p99 = np.median(t), np.percentile(t, 99)
-        print(f"  {name:<52}{len(t):>7}{med:>10.1f}{p99:>10.1f}{med / base:>9.1f}")
+        per_round = [np.median(p) for p in parts]
+        spread = f"{min(per_round):.0f}-{max(per_round):.0f}" if len(parts) > 1 else "-"
+        print(f"  {name:<52}{len(t):>7}{med:>10.1f}{p99:>10.1f}{med / base:>9.1f}{spread:>16}")
 
     print(f"\none-process nominal campaign, {args.episodes} episodes per agent:")
     print(f"  {'':<52}{'episodes/min':>13}{'success %':>11}{'x ZEM/ZEV':>11}")
