@@ -39,7 +39,8 @@ set -euo pipefail
 usage() {
     cat <<'EOF'
 usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
-                              [--teacher zemzev-vernier|ocp] [--demonstrator D] [--dry-run] [-h]
+                              [--teacher zemzev-vernier|ocp] [--demonstrator D] [--threads N]
+                              [--dry-run] [-h]
 
   --seed S         training seed of every stage (default 1)
   --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
@@ -48,15 +49,19 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
-                   teacher's recipe (demonstrations, then aggregated DAgger rounds; about
-                   65 min; the policy is DIR/stage2/best.pt, default DIR runs/ocp__S)
+                   teacher's recipe (demonstrations, then aggregated DAgger rounds; 65 min
+                   on the machine of 11-27, 2.2 h on that of 11-29; the policy is DIR/stage2/best.pt, default DIR runs/ocp__S)
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
                    zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
                    recipe and budget (default DIR runs/ablation_D__S)
+  --threads N      torch threads of each stage (default 1, so two seeds can train side by
+                   side on two cores). With one seed alone on two cores, 2 makes the updates
+                   1.3-1.5x faster; with --teacher ocp the files are the same either way
+                   (checked on shortened runs of both stages, docs/experiments/
+                   2026-11-28-dagger-under-broad.md)
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
-Each stage uses one torch thread, so two seeds can train side by side on two cores. The
-policy is DIR/stage3/final.pt; evaluate it with
+The policy is DIR/stage3/final.pt; evaluate it with
   pd-eval DIR/stage3/final.pt --dispersions standard --episodes 1000
 EOF
 }
@@ -65,6 +70,7 @@ seed=1
 out=""
 stage1=""
 dry=0
+threads=1
 teacher=zemzev-vernier
 demonstrator=mpc-fuel-reserve
 near_pad=(--near-pad)
@@ -77,10 +83,12 @@ while [[ $# -gt 0 ]]; do
         --paper-inputs) near_pad=(); shift ;;
         --teacher) teacher="${2:?--teacher needs zemzev-vernier or ocp}"; shift 2 ;;
         --demonstrator) demonstrator="${2:?--demonstrator needs a value}"; shift 2 ;;
+        --threads) threads="${2:?--threads needs a value}"; shift 2 ;;
         --dry-run) dry=1; shift ;;
         *) echo "train_recipe.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
+[[ "$threads" =~ ^[1-9][0-9]*$ ]] || { echo "train_recipe.sh: --threads must be a positive integer, got '$threads'" >&2; exit 2; }
 [[ "$seed" =~ ^[0-9]+$ ]] || { echo "train_recipe.sh: --seed must be a non-negative integer, got '$seed'" >&2; exit 2; }
 [[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
 [[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
@@ -104,7 +112,7 @@ start=$SECONDS
 stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
     local name=$1
     shift
-    local cmd=(pd-train "$@" --seed "$seed" --torch-threads 1 --run-dir "$out/$name")
+    local cmd=(pd-train "$@" --seed "$seed" --torch-threads "$threads" --run-dir "$out/$name")
     if ((dry)); then
         printf '%q ' "${cmd[@]}"  # quoted, so an empty value (--controller '') survives
         echo
@@ -115,7 +123,7 @@ stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished
         return
     fi
     if [[ -f "$out/$name/checkpoint.pt" ]]; then
-        cmd=(pd-train --resume "$out/$name" --torch-threads 1)
+        cmd=(pd-train --resume "$out/$name" --torch-threads "$threads")
         echo "== $name: resuming from $out/$name/checkpoint.pt"
     fi
     echo "== $name: ${cmd[*]}"

@@ -75,6 +75,13 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_on_an_update_bu
     assert all(c["eval_every_updates"] > 0 for c in stages)
 
 
+def test_every_stage_trains_on_the_torch_threads_asked_one_by_default(tmp_path, capsys):
+    out = str(tmp_path / "r")
+    for args, want in (((), 1), (("--threads", "2"), 2)):
+        stages = stage_configs(capsys, "--teacher", "ocp", "--out", out, *args)
+        assert [c["torch_threads"] for c in stages] == [want, want]
+
+
 def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path, capsys):
     base = stage_configs(capsys, "--teacher", "ocp", "--out", str(tmp_path / "ocp"))
     zv = stage_configs(
@@ -154,6 +161,7 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--teacher", "zemzev"], "--teacher must be zemzev-vernier or ocp"),
         (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel-reserve"),
         (["--demonstrator", "none"], "--demonstrator needs --teacher ocp"),
+        (["--threads", "0"], "--threads must be a positive integer"),
     ],
 )
 def test_bad_flag_is_one_line(args, named):
