@@ -51,7 +51,8 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
                    teacher's recipe (demonstrations, then aggregated DAgger rounds; 65 min
-                   on the machine of 11-27, 2.2 h on that of 11-29; the policy is DIR/stage2/best.pt, default DIR runs/ocp__S)
+                   on the machine of 11-27, 2.2 h on that of 11-29; the policy is
+                   DIR/stage2/best.pt, default DIR runs/ocp__S)
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
                    zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
                    recipe and budget (default DIR runs/ablation_D__S)

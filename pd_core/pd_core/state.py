@@ -11,6 +11,8 @@ from pd_core.config import NEAR_PAD_SCALE, STATE_SCALE
 MAX_ABS_POSITION_M = 1e6
 MAX_ABS_VELOCITY_MPS = 1e4
 MAX_MASS_KG = 1e6
+STATE_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
+"""the three bounds above, as the compiled check takes them (`pd_core.runtime.kernels`)"""
 
 
 def scale_state(state: np.ndarray) -> np.ndarray:
@@ -27,6 +29,15 @@ def near_pad_features(scaled: np.ndarray) -> np.ndarray:
     """(..., 6) tanh(position / 2, 2, 10 m; velocity / 0.5, 0.5, 2 m/s) from Eq. 21 inputs
     (..., 7): resolves the last metres, where Eq. 21's 0.01/m cannot, and saturates above."""
     return np.tanh(np.asarray(scaled)[..., :N_NEAR_PAD] * NEAR_PAD_GAIN)
+
+
+def as_state_rows(states: np.ndarray) -> np.ndarray:
+    """States (B, 7) as contiguous floats (values unchecked), or `check_state`'s ValueError on
+    their shape."""
+    s = np.asarray(states, dtype=float)
+    if s.shape[-1:] != (7,):
+        check_state(s)
+    return np.ascontiguousarray(s.reshape(-1, 7))
 
 
 def check_state(state: np.ndarray) -> np.ndarray:

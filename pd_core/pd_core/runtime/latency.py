@@ -38,12 +38,13 @@ from pd_core.runtime.kernels_latency import (
 from pd_core.runtime.kernels_step import INVALID, JUMPED, before_actor
 from pd_core.runtime.navfilter import NavFilter
 from pd_core.runtime.rowmemory import RowMemory
-from pd_core.state import MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG, check_state
+from pd_core.state import STATE_LIMITS, as_state_rows, check_state
 
 _CONSTS = consts()
 _IDENTITY = np.eye(3)[None, None]
 _NONE_ENGAGED = np.zeros(0, dtype=bool)
-_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
+NO_PIPELINE = (np.zeros((0, 1, 3)), np.zeros(0, dtype=np.int64), _NONE_ENGAGED, False)
+"""`LatencyCompensator.pipeline` where there is no memory (`kernels_step.after_actor` reads none)"""
 
 
 def lag_residuals(
@@ -184,10 +185,7 @@ class LatencyCompensator(RowMemory):
         """(`predict`, then `vertical_thrust_scale`) of rows (B,) in one compiled call
         (`kernels_step.before_actor`), the observed states validated first."""
         rows = np.asarray(rows, dtype=np.int64)
-        obs = np.asarray(observed, dtype=float)
-        if obs.shape[-1:] != (7,):
-            check_state(obs)
-        obs = np.ascontiguousarray(obs.reshape(-1, 7))
+        obs = as_state_rows(observed)
         top = int(rows.max()) + 1 if len(rows) else 0
         if top > self.n_rows:
             self.grow(top)
@@ -201,7 +199,7 @@ class LatencyCompensator(RowMemory):
         want_scale = self.max_delay_steps > 0 and self.thrust_model  # (as vertical_thrust_scale)
         while True:
             code = before_actor(
-                obs, _LIMITS, rows, out, jumped, scale, want_scale, self.cfg.shortfall_sd,
+                obs, STATE_LIMITS, rows, out, jumped, scale, want_scale, self.cfg.shortfall_sd,
                 *self._window, *self._kernel_memory(),
             )  # fmt: skip
             if code == INVALID:

@@ -29,16 +29,13 @@ from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision, Decisions
 from pd_core.runtime.kernels_step import after_actor
-from pd_core.runtime.latency import LatencyCompensator
+from pd_core.runtime.latency import NO_PIPELINE, LatencyCompensator
 from pd_core.runtime.network import NumpyQNetwork, observed_states
 from pd_core.runtime.rules import RuleSettings, rule_settings
 from pd_core.teachers.zemzev import ZemZevController
 
 _ROW0 = np.zeros(1, dtype=np.int64)
 _NO_SCALE = np.ones(0)
-_NO_ISSUED = np.zeros((0, 1, 3))
-_NO_DELAY = np.zeros(0, dtype=np.int64)
-_NO_ENGAGED = np.zeros(0, dtype=bool)
 
 
 def _warm_up(fallback: ZemZevController) -> None:
@@ -81,14 +78,12 @@ def rules_and_record(
     frac = np.empty(n)
     delay = np.empty(n, dtype=np.int64)
     nav = np.empty(n, dtype=bool)
-    if memory is None:
-        kept = (False, rows, _NO_ISSUED, _NO_DELAY, _NO_ENGAGED, False)
-    else:
-        kept = (True, rows, *memory.pipeline())
-    r = settings
-    tail = (r.level_table, r.table_n, r.n_per_axis, r.hi, r.params, *kept, delay, nav)
-    has_scale = memory is not None
-    head = (proposed, decided, scale, has_scale)
+    has_memory = memory is not None
+    pipeline = memory.pipeline() if has_memory else NO_PIPELINE
+    s = settings
+    rules = (s.level_table, s.table_n, s.n_per_axis, s.hi, s.params)
+    tail = (*rules, has_memory, rows, *pipeline, delay, nav)
+    head = (proposed, decided, scale, has_memory)
     if not after_actor(*head, False, actions, hand, source, frac, *tail):
         actions[hand] = fallback.act_batch(decided[hand])
         after_actor(*head, True, actions, hand, source, frac, *tail)

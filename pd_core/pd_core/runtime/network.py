@@ -9,33 +9,18 @@ import numpy as np
 
 from pd_core.runtime.kernels import states_valid
 from pd_core.runtime.kernels_step import network_inputs
-from pd_core.state import (
-    MAX_ABS_POSITION_M,
-    MAX_ABS_VELOCITY_MPS,
-    MAX_MASS_KG,
-    NEAR_PAD_GAIN,
-    check_state,
-)
+from pd_core.state import NEAR_PAD_GAIN, STATE_LIMITS, as_state_rows, check_state
 
 _LAYER = re.compile(r"^net\.(\d+)\.(weight|bias)$")
-_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
 _NO_GAIN = np.zeros(0)
-
-
-def _as_rows(states: np.ndarray) -> np.ndarray:
-    """States (B, 7) as contiguous floats, or `check_state`'s ValueError on their shape."""
-    s = np.asarray(states, dtype=float)
-    if s.shape[-1:] != (7,):
-        check_state(s)
-    return np.ascontiguousarray(s.reshape(-1, 7))
 
 
 def observed_states(states: np.ndarray) -> np.ndarray:
     """States (B, 7) as floats, or `check_state`'s ValueError saying what is wrong with them:
     the compiled check (`kernels.states_valid`) first, `check_state`'s message only when it
     fails (a decision pays microseconds, not `check_state`'s dozen numpy calls)."""
-    s = _as_rows(states)
-    if states_valid(s, _LIMITS):
+    s = as_state_rows(states)
+    if states_valid(s, STATE_LIMITS):
         return s
     return check_state(states).reshape(-1, 7)
 
@@ -77,10 +62,10 @@ class NumpyQNetwork:
         """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid. The
         inputs (scaling, validation and the near-pad features' arguments) are one compiled
         call (`kernels_step.network_inputs`); the tanh and the layers are numpy's."""
-        s = _as_rows(states)
+        s = as_state_rows(states)
         b, k = len(s), len(self._near_gain)
         scaled, near = np.empty((b, 7)), np.empty((b, k))
-        if not network_inputs(s, _LIMITS, self.scale, self._near_gain, scaled, near):
+        if not network_inputs(s, STATE_LIMITS, self.scale, self._near_gain, scaled, near):
             check_state(states)
         h = np.empty((b, 7 + k), dtype=self.dtype)
         h[:, :7] = scaled
