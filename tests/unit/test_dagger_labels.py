@@ -7,9 +7,8 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S
 from pd_core.demonstrations.dagger import label_transitions, student_labels
-from pd_core.dispersions import failure_weights
 from pd_core.dqn.config import preset
-from pd_core.dqn.demo_memory import build_demo_memory, label_scenario_probs
+from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.train import Trainer, training_reward
 from pd_core.dynamics import step
 from pd_core.experiments.evaluate import rollout
@@ -46,47 +45,6 @@ def test_label_noise_flies_random_actions_on_that_share_of_steps_and_labels_them
     np.testing.assert_array_equal(d["labels"], ZemZevController().act_batch(d["states"]))
     net = load_policy(POLICY, shield="never").actor
     np.testing.assert_array_equal(d["proposed"], net.act_batch(d["states"]))
-
-
-def test_label_episodes_draw_their_scenarios_with_the_given_probabilities() -> None:
-    uniform = student_labels(POLICY, "zemzev", 6, 21, dispersions="delay,gusts", workers=1)
-    flown = rollout(load_policy(POLICY, shield="always"), 6, 21, dispersions="delay,gusts")
-    np.testing.assert_array_equal(uniform["scenarios"], flown.scenarios)  # default unchanged
-    assert set(uniform["scenarios"]) == {0, 1}  # seeds 21-26 draw both
-    gusts = student_labels(
-        POLICY, "zemzev", 6, 21, dispersions="delay,gusts", workers=1, scenario_probs=[0.0, 1.0]
-    )
-    assert gusts["scenarios"].tolist() == [1] * 6
-
-
-def test_failure_sampling_draws_the_next_round_where_the_student_failed_in_the_last() -> None:
-    last = {"scenario_episodes": [10, 10, 10], "scenario_failures": [0, 5, 10]}
-    cfg = preset("ocp-dagger", scenario_sampling="failures", scenario_uniform_share=0.5)
-    probs = label_scenario_probs(cfg, last)
-    # Laplace-smoothed rates 1/12, 6/12, 11/12: half uniform, half in their proportion
-    np.testing.assert_allclose(probs, [1 / 6 + 0.5 / 18, 1 / 6 + 3 / 18, 1 / 6 + 5.5 / 18])
-    assert label_scenario_probs(preset("ocp-dagger"), last) is None  # uniform sampling
-    assert label_scenario_probs(cfg, None) is None  # no round before (no init policy)
-    one = {"scenario_episodes": [10], "scenario_failures": [4]}
-    assert label_scenario_probs(cfg, one) is None  # one scenario: nothing to weigh
-
-
-def test_failure_sampled_dagger_rounds_record_their_draw_and_counts(tmp_path: Path) -> None:
-    cfg = preset(
-        "best", controller="zemzev", controller_demo_episodes=2, label_episodes=4,
-        dagger_rounds=2, pretrain_updates=10, num_envs=2, eval_episodes=2, eval_every_s=0.0,
-        progress=False, torch_threads=1, max_minutes=10.0, dispersions="delay,gusts",
-        scenario_sampling="failures",
-    )  # fmt: skip
-    trainer = Trainer(cfg, run_dir=tmp_path, quiet=True)
-    trainer.run()
-    first, second = trainer.demo_info["dagger_rounds"]
-    assert first["scenario_probs"] is None  # no labelled round before it (no init policy)
-    assert sum(first["scenario_episodes"]) == 4 and len(first["scenario_episodes"]) == 2
-    want = failure_weights(
-        np.array(first["scenario_failures"]), np.array(first["scenario_episodes"]), 0.5
-    )
-    np.testing.assert_allclose(second["scenario_probs"], want)
 
 
 def test_label_transitions_step_the_nominal_dynamics() -> None:

@@ -66,27 +66,20 @@ class ShadowTeacher:
 
 
 def _label_chunk(
-    policy_path: str,
-    teacher: str,
-    n: int,
-    seed: int,
-    dispersions: Any,
-    noise: float = 0.0,
-    scenario_probs: np.ndarray | None = None,
+    policy_path: str, teacher: str, n: int, seed: int, dispersions: Any, noise: float = 0.0
 ) -> dict[str, np.ndarray]:
     """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer."""
     runtime = load_policy(policy_path, shield="always")
     rng = np.random.default_rng(seed)
     shadow = ShadowTeacher(runtime.actor, make_controller(teacher), noise, rng)
     runtime.actor = shadow
-    ro = rollout(runtime, n, seed, dispersions=dispersions, chunk=n, scenario_probs=scenario_probs)
+    ro = rollout(runtime, n, seed, dispersions=dispersions, chunk=n)
     return {
         "states": np.concatenate(shadow.states),
         "labels": np.concatenate(shadow.labels),
         "proposed": np.concatenate(shadow.proposed),
         "flown": np.concatenate(shadow.flown),
         "landed": ro.landed,
-        "scenarios": ro.scenarios,
     }
 
 
@@ -100,24 +93,20 @@ def student_labels(
     chunk: int = LABEL_CHUNK_EPISODES,
     address: str = "",
     noise: float = 0.0,
-    scenario_probs: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """The teacher's labels on the states the student at `policy_path` decides on over
     episodes 0..n_episodes-1 (env seed seed + i, disturbances on, under `dispersions`):
     states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, flown
     (N,) the student's (its own, or random with `noise`) before its runtime layer, landed
-    (n_episodes,) the student's outcomes, scenarios (n_episodes,) each episode's scenario of
-    `dispersions`. `workers` None = every core; `address`: on Ray there instead
-    (`map_chunks`); `noise`: the share of steps flown with a random action; `scenario_probs`:
-    how each episode draws its scenario (None: uniformly)."""
+    (n_episodes,) the student's outcomes. `workers` None = every core; `address`: on Ray
+    there instead (`map_chunks`); `noise`: the share of steps flown with a random action."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     if not 0.0 <= noise < 1.0:
         raise ValueError(f"noise must be in [0, 1), got {noise}")
     make_controller(teacher)  # an unknown name fails here, in the caller's process
-    probs = None if scenario_probs is None else np.asarray(scenario_probs, dtype=float)
     tasks = [
-        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions, noise, probs)
+        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions, noise)
         for k in range(0, n_episodes, chunk)
     ]
     parts = map_chunks(_label_chunk, tasks, workers, address)

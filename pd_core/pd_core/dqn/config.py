@@ -139,9 +139,8 @@ class TrainConfig:
     pd_core.dispersions ("": nominal, the paper)"""
     scenario_sampling: str = "uniform"
     """how training episodes draw their `dispersions` scenario: uniform, or failures (in
-    proportion to each scenario's recent training failure rate, over a uniform floor; a DAgger
-    round's label episodes by the student's failures per scenario in the round before; the
-    teacher's demonstrations and the periodic evaluations stay uniform)"""
+    proportion to each scenario's recent training failure rate, over a uniform floor; the
+    periodic evaluations stay uniform)"""
     scenario_uniform_share: float = 0.5
     """with scenario_sampling=failures: the share of episodes still drawn uniformly"""
     scenario_window: int = 200

@@ -13,7 +13,6 @@ from pd_core.config import RewardConfig
 from pd_core.demonstrations.dagger import label_transitions, student_labels
 from pd_core.demonstrations.open_loop import load_demos
 from pd_core.demonstrations.teacher_flown import controller_demonstrations
-from pd_core.dispersions import failure_weights, load_scenarios
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
 from pd_core.experiments.evaluate import rollout
@@ -193,18 +192,12 @@ def file_steps(path: Path) -> PhysicalSteps:
 
 
 def label_part(
-    cfg: TrainConfig,
-    reward_cfg: RewardConfig,
-    policy_path: str,
-    round_index: int,
-    scenario_probs: np.ndarray | None = None,
+    cfg: TrainConfig, reward_cfg: RewardConfig, policy_path: str, round_index: int
 ) -> tuple[DemoTransitions, dict[str, Any]]:
     """DAgger round `round_index`: the (first) `controller` labels every state the policy at
     `policy_path` decides on over `label_episodes` episodes under `dispersions` (env seeds
-    seed + LABEL_SEED_OFFSET + round_index * label_episodes + i, new episodes each round,
-    drawing their scenarios with `scenario_probs`, None: uniformly), as one-step
-    demonstrations; and what the round saw, with the student's episodes and failures per
-    scenario (`label_scenario_probs` makes the next round's draw of them)."""
+    seed + LABEL_SEED_OFFSET + round_index * label_episodes + i, new episodes each round), as
+    one-step demonstrations; and what the round saw."""
     teacher = cfg.controller.split(",")[0].strip()
     d = student_labels(
         policy_path,
@@ -214,12 +207,8 @@ def label_part(
         cfg.dispersions,
         address=cfg.address,
         noise=cfg.label_noise,
-        scenario_probs=scenario_probs,
     )
     steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
-    k = len(load_scenarios(cfg.dispersions)) if cfg.dispersions.strip() else 1
-    episodes = np.bincount(d["scenarios"], minlength=k)
-    failures = np.bincount(d["scenarios"], weights=~d["landed"], minlength=k).astype(int)
     return demo_transitions(steps, cfg, reward_cfg), {
         "round": round_index,
         "teacher": teacher,
@@ -230,25 +219,7 @@ def label_part(
         "student_success_rate": float(np.mean(d["landed"])),
         "dispersions": cfg.dispersions or "nominal",
         "noise": cfg.label_noise,
-        "scenario_probs": None if scenario_probs is None else [float(p) for p in scenario_probs],
-        "scenario_episodes": episodes.tolist(),
-        "scenario_failures": failures.tolist(),
     }
-
-
-def label_scenario_probs(cfg: TrainConfig, last_round: dict[str, Any] | None) -> np.ndarray | None:
-    """How the next DAgger round's episodes draw their scenarios: with `scenario_sampling =
-    "failures"`, `pd_core.dispersions.failure_weights` of the student's failures per scenario
-    in the last round (`label_part`'s info; `scenario_uniform_share` stays uniform); else, or
-    with no last round counted per scenario (none, or one scenario), None (uniformly)."""
-    counted = last_round is not None and len(last_round.get("scenario_episodes", ())) > 1
-    if cfg.scenario_sampling != "failures" or not counted:
-        return None
-    return failure_weights(
-        np.asarray(last_round["scenario_failures"]),
-        np.asarray(last_round["scenario_episodes"]),
-        cfg.scenario_uniform_share,
-    )
 
 
 def build_demo_memory(

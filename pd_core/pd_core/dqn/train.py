@@ -31,7 +31,7 @@ from pd_core.dqn.checkpoint import (
     write_checkpoint,
 )
 from pd_core.dqn.config import TrainConfig, check_config
-from pd_core.dqn.demo_memory import build_demo_memory, label_part, label_scenario_probs
+from pd_core.dqn.demo_memory import build_demo_memory, label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
 from pd_core.dqn.loop import TrainingLoop
 from pd_core.dqn.network import QNetwork
@@ -295,13 +295,10 @@ class Trainer(TrainingLoop):
 
     def dagger_round_labels(self) -> dict[str, Any]:
         """The next DAgger round: the current network, saved as `dagger_student.pt`, flies new
-        episodes behind its layer (their scenarios drawn by `label_scenario_probs` of the last
-        round); the teacher's labels on its states join the demonstrations."""
+        episodes behind its layer; the teacher's labels on its states join the demonstrations."""
         self.dagger_round += 1
         student = self.save_policies("dagger_student")
-        rounds = self.demo_info.get("dagger_rounds") or [self.demo_info.get("labels")]
-        probs = label_scenario_probs(self.cfg, rounds[-1])
-        part, info = label_part(self.cfg, self.reward_cfg, str(student), self.dagger_round, probs)
+        part, info = label_part(self.cfg, self.reward_cfg, str(student), self.dagger_round)
         assert self.demo is not None
         self.demo = self.demo.extended(*part)
         self._device_update = None  # rebuilt on the grown memory at the next update

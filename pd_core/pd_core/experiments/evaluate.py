@@ -46,7 +46,6 @@ class Rollouts:
     terminated: np.ndarray  # (N,) bool (False: out of time)
     steps: np.ndarray  # (N,)
     returns: np.ndarray  # (N,) undiscounted training reward
-    scenarios: np.ndarray  # (N,) index of each episode's dispersion scenario
     trajectories: list[np.ndarray] = field(default_factory=list)  # states (T+1, 7), if kept
     actions: list[np.ndarray] = field(default_factory=list)  # actions (T,), if kept
 
@@ -63,15 +62,7 @@ def concat_rollouts(parts: Sequence[Rollouts]) -> Rollouts:
     return Rollouts(*cat, paths, acts)
 
 
-_ARRAY_FIELDS = (
-    "initial_states",
-    "final_states",
-    "landed",
-    "terminated",
-    "steps",
-    "returns",
-    "scenarios",
-)
+_ARRAY_FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
 
 
 def rollout(
@@ -87,7 +78,6 @@ def rollout(
     dispersions: str | Dispersions | Sequence[Dispersions] = "",
     chunk: int = CHUNK_EPISODES,
     episode_seeds: Sequence[int] | None = None,
-    scenario_probs: np.ndarray | None = None,
 ) -> Rollouts:
     """Fly episodes 0..n_episodes-1 (episode i: env seed seed + i, or episode_seeds[i]) with
     greedy actions.
@@ -95,8 +85,7 @@ def rollout(
     Episodes are flown `chunk` at a time in one vector env (memory stays bounded for 10^6
     episodes); the result does not depend on how the caller splits a campaign as long as the
     split falls on multiples of `chunk` (then every chunk is the same batch). Keeps the states
-    and actions of the first `keep_trajectories` episodes. `scenario_probs`: the probabilities
-    each episode draws the `dispersions` scenarios with (None: uniformly).
+    and actions of the first `keep_trajectories` episodes.
     """
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
@@ -113,7 +102,6 @@ def rollout(
                 autoreset=False,
                 dispersions=dispersions,
             )
-            env.set_scenario_probs(scenario_probs)
         init = None if initial_states is None else initial_states[start : start + n]
         keep = max(0, min(keep_trajectories - start, n))
         seeds = (
@@ -138,7 +126,6 @@ def fly_episodes(
     _, info = env.reset(seed=seed, options=opts)
     n = env.num_envs
     init = info["state"].copy()
-    scenarios = env.episode_scenarios
     term = np.zeros(n, dtype=bool)
     landed = np.zeros(n, dtype=bool)
     ret = np.zeros(n)
@@ -173,7 +160,6 @@ def fly_episodes(
         term,
         env.steps.copy(),
         ret,
-        scenarios,
         [np.array(p) for p in paths],
         [np.array(a, dtype=np.int64) for a in acts],
     )
