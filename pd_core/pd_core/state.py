@@ -40,11 +40,24 @@ def as_state_rows(states: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(s.reshape(-1, 7))
 
 
+def _one_state_ok(x: float, y: float, z: float, vx: float, vy: float, vz: float, m: float) -> bool:
+    """True if one state passes every check of `check_state` (NaN and inf fail a comparison;
+    no `max`, which would skip a NaN)."""
+    p, v = MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS
+    return (
+        abs(x) <= p and abs(y) <= p and abs(z) <= p
+        and abs(vx) <= v and abs(vy) <= v and abs(vz) <= v
+        and 0.0 < m <= MAX_MASS_KG
+    )  # fmt: skip
+
+
 def check_state(state: np.ndarray) -> np.ndarray:
     """A float (..., 7) copy of `state`, or ValueError saying what is wrong with it."""
     s = np.asarray(state, dtype=float)
     if s.shape[-1:] != (7,):
         raise ValueError(f"state must have 7 entries [x, y, z, vx, vy, vz, m], got shape {s.shape}")
+    if s.shape == (7,) and _one_state_ok(*s.tolist()):
+        return s.copy()  # the common case, one good state, in plain floats (~10x faster)
     if not np.all(np.isfinite(s)):
         raise ValueError(f"state has NaN or infinite values: {s.tolist()}")
     if np.any(np.abs(s[..., 0:3]) > MAX_ABS_POSITION_M):

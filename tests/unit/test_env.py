@@ -113,6 +113,26 @@ def test_nan_and_absurd_states_are_refused():
         check_state([0, 0, 2500])
 
 
+@pytest.mark.parametrize("slot", range(7))
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf, 2e6, -2e6])
+def test_one_state_is_refused_as_a_batch_of_it_is(slot, value):
+    """A single state takes a plain-float fast path: every fault a batch row is refused for
+    (NaN, inf, a bound in any slot) is refused there too, with the same line."""
+    state = np.array([0.0, 0.0, 2500.0, 0.0, 0.0, -80.0, 2000.0])
+    state[slot] = value
+    with pytest.raises(ValueError) as batch:
+        check_state(np.stack([state, state]))
+    with pytest.raises(ValueError) as one:
+        check_state(state)
+
+    def reason(e: pytest.ExceptionInfo) -> str:  # the line without the values it quotes
+        return str(e.value).split(":")[0].split(" got ")[0]
+
+    assert reason(one) == reason(batch)
+    good = check_state(np.array([1.0, -2.0, 3.0, 4.0, -5.0, 6.0, 1e6]))
+    np.testing.assert_array_equal(good, [1.0, -2.0, 3.0, 4.0, -5.0, 6.0, 1e6])
+
+
 @pytest.mark.parametrize("action", [-1, 147, 3.5, "7"])
 def test_out_of_range_actions_are_refused(action):
     env = PoweredDescentEnv()

@@ -9,7 +9,7 @@ from pd_core import dynamics, ocp
 from pd_core.config import GRAVITY_MPS2
 from pd_core.demonstrations.open_loop import table1_initial_states
 from pd_core.ocp import kernels
-from pd_core.ocp.model import EXHAUST_VELOCITY_MPS, KN, PHI_SERIES
+from pd_core.ocp.model import EXHAUST_VELOCITY_MPS, KN, PHI_SERIES, control_times
 
 CASES = table1_initial_states()
 
@@ -195,3 +195,14 @@ def test_lp_pass_rows_are_the_exact_jacobian_and_the_altitude_floor() -> None:
         e[k, 2] = 1.0
         fd = (pb.altitudes(pb.fly(p + e, g), g) - pb.altitudes(pb.fly(p - e, g), g))[sel] / 2.0
         np.testing.assert_allclose(floor[:, k] / KN, fd, rtol=0.1, atol=1e-3 * np.abs(fd).max())
+
+
+def test_control_times_are_linspace_to_the_bit():
+    """The teacher's control times replace np.linspace(0, t_f, n) without changing a plan: the
+    same floats, bit for bit, for every size the plans use and beyond."""
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 40, 81, 500, 501):
+        for t_f in (0.0, 0.2, 1.0, 33.3, *rng.uniform(0.0, 300.0, 50)):
+            want = np.linspace(0.0, t_f, n)
+            got = control_times(float(t_f), n)
+            assert got.tobytes() == want.tobytes(), (n, t_f)

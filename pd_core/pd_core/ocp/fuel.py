@@ -32,6 +32,7 @@ from pd_core.ocp.model import (
     Problem,
     SolverOutput,
     SolveTimeout,
+    control_times,
 )
 from pd_core.ocp.qp import INFEASIBLE, TfEval, WarmStart, free_final_time
 
@@ -143,7 +144,7 @@ def fuel_lp_plan(
     hi_pm = np.stack([np.maximum(pb.limits.hi, 0.0), np.maximum(-pb.limits.lo, 0.0)], 1) / KN
     ub = np.repeat(hi_pm.reshape(-1), n)
     if lateral_settle_s > 0.0:
-        settled = np.linspace(0.0, g.t_f, n) >= g.t_f - lateral_settle_s
+        settled = control_times(g.t_f, n) >= g.t_f - lateral_settle_s
         ub = ub.reshape(3, 2, n)
         ub[0:2, :, settled] = 0.0
         ub = ub.reshape(-1)

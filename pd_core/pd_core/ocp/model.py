@@ -43,7 +43,7 @@ from pd_core.config import (
 )
 from pd_core.dynamics import PHI1, PHI2
 from pd_core.ocp import kernels
-from pd_core.ocp.request import check_request
+from pd_core.ocp.request import MAX_CONTROL_POINTS, check_request
 
 EXHAUST_VELOCITY_MPS = ISP_S * G0_MPS2  # Eq. 3
 # ours: the range searched for t_f. The Table 1/3 optima lie in 40-90 s; 300 s is far beyond any
@@ -57,6 +57,19 @@ def _deriv_coeffs(coeffs: tuple[float, ...]) -> tuple[float, ...]:
     """Coefficients (highest power first) of the derivative of a Horner polynomial."""
     deg = len(coeffs) - 1
     return tuple(c * (deg - i) for i, c in enumerate(coeffs[:-1]))
+
+
+_ARANGE = np.arange(MAX_CONTROL_POINTS, dtype=float)
+
+
+def control_times(t_f: float, n: int) -> np.ndarray:
+    """The n control times (s) of a plan of t_f s: np.linspace(0, t_f, n) to the bit (i * step,
+    the last one t_f), without its per-call overhead (the teacher takes several a re-plan)."""
+    if not 2 <= n <= MAX_CONTROL_POINTS:
+        return np.linspace(0.0, t_f, n)
+    t = _ARANGE[:n] * (t_f / (n - 1))
+    t[-1] = t_f
+    return t
 
 
 # the phi series of `pd_core.dynamics` and their derivatives (leading 0), as the kernels take them

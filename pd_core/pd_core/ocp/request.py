@@ -47,13 +47,15 @@ def _check_state(position: Any, velocity: Any, mass: Any) -> str | None:
         check_state(np.concatenate([pos, vel, m]))
     except ValueError as exc:
         return str(exc)
-    if pos[2] <= 0.0:
-        return f"altitude must be > 0 m, got {pos[2]:g} m"
-    if m[0] <= DRY_MASS_KG:
-        return f"mass must exceed the dry mass {DRY_MASS_KG:g} kg, got {m[0]:g} kg"
-    if np.abs(pos).max() > OCP_MAX_ABS_POSITION_M:
+    # plain floats from here (all finite): a re-plan's `Problem.at` runs this every step
+    (x, y, z), (vx, vy, vz), (mass,) = pos.tolist(), vel.tolist(), m.tolist()
+    if z <= 0.0:
+        return f"altitude must be > 0 m, got {z:g} m"
+    if mass <= DRY_MASS_KG:
+        return f"mass must exceed the dry mass {DRY_MASS_KG:g} kg, got {mass:g} kg"
+    if max(abs(x), abs(y), abs(z)) > OCP_MAX_ABS_POSITION_M:
         return f"position beyond {OCP_MAX_ABS_POSITION_M:g} m is absurd for this lander"
-    if np.linalg.norm(vel) > OCP_MAX_SPEED_MPS:
+    if math.sqrt(vx * vx + vy * vy + vz * vz) > OCP_MAX_SPEED_MPS:
         return f"speed beyond {OCP_MAX_SPEED_MPS:g} m/s is absurd for this lander"
     return None
 

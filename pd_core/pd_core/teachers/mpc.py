@@ -74,6 +74,7 @@ from pd_core.discretise import eq5_levels
 from pd_core.dynamics import step_scalar
 from pd_core.ocp.fuel import fuel_lp_plan
 from pd_core.ocp.lp import LPSolver
+from pd_core.ocp.model import control_times
 from pd_core.ocp.qp import WarmStart, energy_qp_plan
 from pd_core.state import check_state
 
@@ -345,8 +346,8 @@ class MPCController:
             return None
         n = self._n_control(t_go)
         pb = (self._problem_full if full else self._problem).at(self._to_gate(s), n_control=n)
-        old_t = np.linspace(0.0, row.t_go, len(row.p))
-        new_t = np.linspace(0.0, t_go, n) + DT_S
+        old_t = control_times(row.t_go, len(row.p))
+        new_t = control_times(t_go, n) + DT_S
         warm = np.column_stack([np.interp(new_t, old_t, row.p[:, a]) for a in range(3)])
         st = WarmStart(warm, row.active if n == len(row.p) else None)
         g = pb.grid(t_go)
@@ -394,8 +395,8 @@ class MPCController:
             return None
         n = self._n_control(res.time_of_flight)
         if n != n0:  # resample the plan to the size warm re-plans will use
-            old_t = np.linspace(0.0, res.time_of_flight, n0)
-            new_t = np.linspace(0.0, res.time_of_flight, n)
+            old_t = control_times(res.time_of_flight, n0)
+            new_t = control_times(res.time_of_flight, n)
             p = np.column_stack([np.interp(new_t, old_t, p[:, a]) for a in range(3)])
         row.p, row.t_go, row.active = p, res.time_of_flight, None
         return p, res.time_of_flight
@@ -412,7 +413,7 @@ class MPCController:
         """
         p, t_go = plan
         # thrust of the first step: the plan interpolated at the step's midpoint (as `Grid`)
-        t_ctrl = np.linspace(0.0, t_go, len(p))
+        t_ctrl = control_times(t_go, len(p))
         u0 = np.array([np.interp(0.5 * DT_S, t_ctrl, p[:, a]) for a in range(3)])
         dv_plan = np.array(step_scalar(tuple(s), tuple(u0), _ZERO, DT_S)[3:6]) - s[3:6]
         a_star = np.clip((u0 - self._lo) / (self._hi - self._lo), 0.0, 1.0)
