@@ -16,8 +16,8 @@
 #   2. `ocp-dagger` preset from stage 1's best.pt, under the `broad` dispersions: 500 teacher
 #      episodes, then seven DAgger rounds (the initial network's and six more), each 500 new
 #      episodes flown by the current network and labelled by the teacher, aggregated, 20k
-#      pre-training updates after each; no interaction (35 min on 11-27, 66 min on 11-29;
-#      54 min there with --threads 2, the same file).
+#      pre-training updates after each; no interaction (35 min on 11-27, 66 min on 11-29 with
+#      one torch thread, 54 min with two, the same file).
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
 #      on the machine's speed or load. The recipe's policy is stage 2's best.pt
 #      (models/pd_dqn_ocp.pt for seed 1).
@@ -56,12 +56,11 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
                    zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
                    recipe and budget (default DIR runs/ablation_D__S)
-  --threads N      torch threads of each stage (default 1, so two seeds can train side by
-                   side on two cores). With one seed alone on two cores, 2 makes the updates
-                   1.3-1.5x faster; with --teacher ocp the files are the same either way
-                   (checked on shortened runs of both stages and the whole stage 2:
-                   66 -> 54 min on the machine of 11-29; docs/experiments/
-                   2026-11-28-dagger-under-broad.md)
+  --threads N      torch threads of each stage (default 2: one seed on two cores; give 1 to
+                   train two seeds side by side). With --teacher ocp the files are the same
+                   either way (shortened runs of both stages, the whole stage 2, and the whole
+                   recipe for seed 1: docs/experiments/2026-11-29-recipe-wall-time.md); 2
+                   makes the updates 1.3-1.5x faster
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 The policy is DIR/stage3/final.pt; evaluate it with
@@ -73,7 +72,7 @@ seed=1
 out=""
 stage1=""
 dry=0
-threads=1
+threads=2
 teacher=zemzev-vernier
 demonstrator=mpc-fuel-reserve
 near_pad=(--near-pad)

@@ -75,9 +75,9 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_on_an_update_bu
     assert all(c["eval_every_updates"] > 0 for c in stages)
 
 
-def test_every_stage_trains_on_the_torch_threads_asked_one_by_default(tmp_path, capsys):
+def test_every_stage_trains_on_the_torch_threads_asked_two_by_default(tmp_path, capsys):
     out = str(tmp_path / "r")
-    for args, want in (((), 1), (("--threads", "2"), 2)):
+    for args, want in (((), 2), (("--threads", "1"), 1)):
         stages = stage_configs(capsys, "--teacher", "ocp", "--out", out, *args)
         assert [c["torch_threads"] for c in stages] == [want, want]
 
