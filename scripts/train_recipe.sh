@@ -11,13 +11,13 @@
 # With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
 # mpc-fuel-reserve, from scratch, behind the runtime layer:
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction; 201,000
-#      gradient updates, evaluated every 10,000 (30 min on the machine of 11-27, 62.5 min on
-#      that of 11-29);
+#      gradient updates, evaluated every 10,000 (30 min on the machine of 11-27, 45 min on
+#      that of 11-29 with two torch threads);
 #   2. `ocp-dagger` preset from stage 1's best.pt, under the `broad` dispersions: 500 teacher
 #      episodes, then seven DAgger rounds (the initial network's and six more), each 500 new
 #      episodes flown by the current network and labelled by the teacher, aggregated, 20k
-#      pre-training updates after each; no interaction (35 min on 11-27, 66 min on 11-29 with
-#      one torch thread, 54 min with two, the same file).
+#      pre-training updates after each; no interaction (35 min on 11-27, 52 min on 11-29 with
+#      two torch threads; the same file with one).
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
 #      on the machine's speed or load. The recipe's policy is stage 2's best.pt
 #      (models/pd_dqn_ocp.pt for seed 1).
@@ -51,7 +51,7 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
                    teacher's recipe (demonstrations, then aggregated DAgger rounds; 65 min
-                   on the machine of 11-27, 2.2 h on that of 11-29; the policy is
+                   on the machine of 11-27, 98 min on that of 11-29; the policy is
                    DIR/stage2/best.pt, default DIR runs/ocp__S)
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
                    zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
@@ -60,7 +60,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    train two seeds side by side). With --teacher ocp the files are the same
                    either way (shortened runs of both stages, the whole stage 2, and the whole
                    recipe for seed 1: docs/experiments/2026-11-29-recipe-wall-time.md); 2
-                   makes the updates 1.3-1.5x faster
+                   makes the updates 1.3-1.5x faster. The zemzev-vernier recipe stops on
+                   wall time, so 2 gives it more updates: its five seeds were measured
+                   with --threads 1
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
 The policy is DIR/stage3/final.pt; evaluate it with
