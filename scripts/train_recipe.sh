@@ -50,7 +50,7 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
                    as it was before them, Eq. 21's 7 inputs only
   --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
-                   teacher's recipe (demonstrations, then aggregated DAgger rounds; 65 min
+                   teacher's recipe (demonstrations, then aggregated DAgger rounds; 70 min
                    on the machine of 11-27, 98 min on that of 11-29; the policy is
                    DIR/stage2/best.pt, default DIR runs/ocp__S)
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),

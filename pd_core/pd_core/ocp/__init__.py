@@ -27,7 +27,14 @@ import numpy as np
 from pd_core.config import OCP_CONTROL_POINTS, OCP_THRUST, ThrustLimits
 from pd_core.ocp.fuel import solve_fuel
 from pd_core.ocp.guess import initial_guess
-from pd_core.ocp.model import EXHAUST_VELOCITY_MPS, Grid, Problem, SolverOutput, fly
+from pd_core.ocp.model import (
+    EXHAUST_VELOCITY_MPS,
+    Grid,
+    Problem,
+    SolverOutput,
+    control_times,
+    fly,
+)
 from pd_core.ocp.qp import solve_energy
 from pd_core.ocp.request import (
     DEFAULT_METHOD,
@@ -109,7 +116,7 @@ def result_of(pb: Problem, out: SolverOutput, method: str, t_start: float) -> OC
         fuel=float(pb.m0 - states[-1, 6]),
         cost=float(cost),
         thrust=p,
-        control_times=np.linspace(0.0, t_f, pb.n_control),
+        control_times=control_times(t_f, pb.n_control),
         states=states,
         state_times=times,
         solve_time=time.perf_counter() - t_start,
