@@ -9,6 +9,9 @@
    CPU (numpy replay, as `pd-train --device cpu`; and the device code path, eager), and where torch
    sees a GPU, cuda eager and cuda graph (`pd-train --device cuda`: replay memories on the GPU, the
    whole update one CUDA graph; the plain loop captured the same way).
+   1b. The recipe's update (`ocp-dagger`) beside the same update as the plain per-tensor loop
+   it was up to 2f59083 (module calls, per-tensor Adam and average), blocks interleaved,
+   with the ratio and a check that both give the same weights to the bit.
 2. What one env step of the paper's loop (`pd-train --preset paper-agent1`, one env) costs besides
    the update: epsilon-greedy action, env step, n-step collector, replay insert, minibatch sampling,
    so the per-step cost of any `--updates-per-step` ratio can be read off.
@@ -298,6 +301,66 @@ def env_steps_per_s(num_envs: int, seconds: float) -> float:
     return _per_s(step, seconds) * num_envs
 
 
+def per_tensor_agent(cfg) -> DQNAgent:
+    """An agent whose update runs as the plain per-tensor loop did up to 2f59083: module
+    calls, torch's CPU default Adam (a Python loop over tensors), the parameter lists walked
+    every update, one `lerp_` per parameter for the average (the same bits as ours)."""
+    a = DQNAgent(cfg)
+    for g in a.opt.param_groups:
+        g["foreach"] = None
+
+    def gradient_step(loss: torch.Tensor) -> None:
+        a.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(a.q.parameters(), a.cfg.grad_clip)
+        a.opt.step()
+
+    def average_step() -> None:
+        with torch.no_grad():
+            for w_avg, w in zip(a.q_avg.parameters(), a.q.parameters(), strict=True):
+                w_avg.lerp_(w, 1.0 - a.cfg.weight_average)
+
+    a.gradient_step, a.average_step = gradient_step, average_step
+    for net in (a.q, a.q_target, a.q_avg):
+        net.forward = lambda obs, net=net: net.net(net.inputs(obs))
+    return a
+
+
+def recipe_update_report(seconds: float, blocks: int = 40) -> None:
+    """Part 1b: the recipe's update (`ocp-dagger`: 128 + 128 demonstrations, Adam, clip, weight
+    average, near-pad inputs), ours against the per-tensor loop, blocks of 50 updates on the
+    same batches interleaved (this machine's speed drifts), and the weights compared."""
+    cfg = preset("ocp-dagger")
+    rng = np.random.default_rng(0)
+    _mem, demo = _memories(rng)
+    batches = [demo.sample(cfg.batch_agent + cfg.batch_demo, rng) for _ in range(50)]
+    agents = {}
+    for name in ("per-tensor loop (before)", "pd-train (DQNAgent)"):
+        torch.manual_seed(0)
+        agents[name] = per_tensor_agent(cfg) if name.startswith("per") else DQNAgent(cfg)
+    ms: dict[str, list[float]] = {k: [] for k in agents}
+    t_end = time.perf_counter() + seconds * 4  # the first pass always runs
+    while len(ms["pd-train (DQNAgent)"]) < blocks and time.perf_counter() < t_end:
+        for name, agent in agents.items():
+            t0 = time.perf_counter()
+            for b in batches:
+                agent.update(b)
+                agent.average_step()
+            ms[name].append(1e3 * (time.perf_counter() - t0) / len(batches))
+    before, ours = (np.array(v) for v in ms.values())
+    same = all(
+        torch.equal(x, y)
+        for x, y in zip(*(a.policy_net.state_dict().values() for a in agents.values()), strict=True)
+    )
+    print("1b. The recipe's update (ocp-dagger, batch 128 + 128, Adam, clip 10, weight average)")
+    for name, v in ms.items():
+        print(f"   {name:34s} {np.median(v):8.2f} ms median of {len(v)} blocks of 50")
+    print(
+        f"   ours / before, paired blocks: median {np.median(ours / before):.3f}, ours faster in "
+        f"{int((ours < before).sum())} of {len(ours)}; the same weights to the bit: {same}"
+    )
+
+
 def paper_update_report(seconds: float) -> float:
     """Part 1; returns the update time in microseconds (ours)."""
     flops = update_flops(preset("paper-agent1").hidden, 200)
@@ -333,6 +396,7 @@ def main() -> None:
     torch.set_num_threads(a.threads)
     print(f"torch threads: {a.threads}")
     upd_us = paper_update_report(a.seconds)
+    recipe_update_report(a.seconds)
     if a.only_updates:
         if a.ratio_check:
             ratio_check(a.ratio_check, lr=a.ratio_lr)

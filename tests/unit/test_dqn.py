@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import copy
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from pd_core.dqn.agent import DQNAgent, epsilon_at, large_margin_loss, td_targets
 from pd_core.dqn.config import PRESETS, TrainConfig, add_arguments, field_docs, from_args, preset
@@ -143,6 +145,55 @@ def test_weight_average_moves_one_minus_decay_of_the_way_each_update():
     plain = DQNAgent(_tiny_cfg())
     assert plain.q_avg is None and plain.policy_net is plain.q
     plain.average_step()
+
+
+def test_update_is_the_per_tensor_arithmetic_to_the_bit():
+    """The agent's update (functional forward, foreach Adam, cached parameter lists, one
+    foreach lerp for the average) gives the same weights, to the bit, as the plain per-tensor
+    loop: module calls, torch's CPU default Adam, and one lerp_ per parameter. A change that
+    moved a bit here would change every shipped file's recipe output."""
+    cfg = replace(
+        _tiny_cfg(near_pad=True, grad_clip=0.5, weight_average=0.9, double_dqn=True),
+        hidden=(16, 8),
+        loss="huber",
+        margin=1.0,
+        target_period=7,
+    )
+    torch.manual_seed(0)
+    agent = DQNAgent(cfg)
+    q, qt, qa = (copy.deepcopy(n) for n in (agent.q, agent.q_target, agent.q_avg))
+    opt = torch.optim.Adam(q.parameters(), lr=cfg.lr, eps=1.5e-4, foreach=False)
+
+    def plain(net: QNetwork, x: torch.Tensor) -> torch.Tensor:
+        return net.net(net.inputs(x))
+
+    for k in range(30):
+        b = _batch(32, seed=k)
+        b = b._replace(demo=torch.arange(32) % 2 == 0)
+        agent.update(b)
+        agent.average_step()
+        q_all = plain(q, b.obs)
+        qsa = q_all.gather(1, b.actions[:, None]).squeeze(1)
+        with torch.no_grad():
+            a_next = plain(q, b.next_obs).argmax(dim=1, keepdim=True)
+            target = b.rewards + b.discounts * plain(qt, b.next_obs).gather(1, a_next).squeeze(1)
+        loss = F.smooth_l1_loss(qsa, target) + cfg.margin * large_margin_loss(
+            q_all[b.demo], b.actions[b.demo], cfg.margin_value
+        )
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(list(q.parameters()), cfg.grad_clip)
+        opt.step()
+        if (k + 1) % cfg.target_period == 0:
+            qt.load_state_dict(q.state_dict())
+        with torch.no_grad():
+            for w_avg, w in zip(qa.parameters(), q.parameters(), strict=True):
+                w_avg.lerp_(w, 1.0 - cfg.weight_average)
+    for mine, ref in ((agent.q, q), (agent.q_avg, qa)):
+        for (name, a), b in zip(mine.state_dict().items(), ref.state_dict().values(), strict=True):
+            assert torch.equal(a, b), name
+    x = torch.randn(5, 7)
+    assert torch.equal(agent.q(x), plain(agent.q, x))
 
 
 def _linear_net(weight: list[list[float]], bias: list[float]) -> QNetwork:

@@ -86,14 +86,18 @@ class DQNAgent:
             self.q_avg = copy.deepcopy(self.q)
             for p in self.q_avg.parameters():
                 p.requires_grad_(False)
-        # capturable only where asked: the CPU path's optimiser is the one it always had
-        extra: dict[str, Any] = {"capturable": True} if capturable else {}
+        # the parameter lists, walked once here rather than by every update
+        self._params = list(self.q.parameters())
+        self._avg_params = list(self.q_avg.parameters()) if self.q_avg is not None else []
+        # capturable only where asked; foreach (one call for all parameters, where the CPU
+        # default loops in Python) flies the same arithmetic per tensor: the same bits
+        extra: dict[str, Any] = {"foreach": True}
+        if capturable:
+            extra["capturable"] = True
         if cfg.optimizer == "rmsprop":
-            self.opt: torch.optim.Optimizer = torch.optim.RMSprop(
-                self.q.parameters(), lr=cfg.lr, **extra
-            )
+            self.opt: torch.optim.Optimizer = torch.optim.RMSprop(self._params, lr=cfg.lr, **extra)
         elif cfg.optimizer == "adam":
-            self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr, eps=1.5e-4, **extra)
+            self.opt = torch.optim.Adam(self._params, lr=cfg.lr, eps=1.5e-4, **extra)
         else:
             raise ValueError(f"optimizer must be rmsprop or adam, got {cfg.optimizer!r}")
         if cfg.loss not in ("mse", "huber"):
@@ -169,7 +173,7 @@ class DQNAgent:
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         if self.cfg.grad_clip > 0.0:
-            torch.nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
+            torch.nn.utils.clip_grad_norm_(self._params, self.cfg.grad_clip)
         self.opt.step()
 
     def count_update(self) -> None:
@@ -199,16 +203,13 @@ class DQNAgent:
             self.q_avg.load_state_dict(self.q.state_dict())
 
     def average_step(self) -> None:
-        """w_avg <- d w_avg + (1 - d) w for every parameter (d = cfg.weight_average); buffers
-        are copied. Called once per gradient update; nothing without an average."""
+        """w_avg <- d w_avg + (1 - d) w for every parameter (d = cfg.weight_average), one
+        `lerp_` per tensor in one call. Called once per gradient update; nothing without an
+        average. (The network's one buffer, the near-pad gain, is a constant.)"""
         if self.q_avg is None:
             return
         with torch.no_grad():
-            w = 1.0 - self.cfg.weight_average
-            for a, p in zip(self.q_avg.parameters(), self.q.parameters(), strict=True):
-                a.lerp_(p, w)
-            for a, b in zip(self.q_avg.buffers(), self.q.buffers(), strict=True):
-                a.copy_(b)
+            torch._foreach_lerp_(self._avg_params, self._params, 1.0 - self.cfg.weight_average)
 
     def state_dict(self) -> dict[str, Any]:
         return {
@@ -230,10 +231,11 @@ class DQNAgent:
 
     def _own_optimiser_flags(self) -> None:
         """A loaded optimiser state brings its saver's `capturable` (a CUDA-graph run's, or a CPU
-        run's): keep this agent's own, with each step count where that wants it (a capturable
-        optimiser counts on the device, the others on the CPU)."""
+        run's) and `foreach`: keep this agent's own, with each step count where that wants it
+        (a capturable optimiser counts on the device, the others on the CPU)."""
         for group in self.opt.param_groups:
             group["capturable"] = self.capturable
+            group["foreach"] = True  # saved up to 2f59083: None, the same bits
         where = self.device if self.capturable else torch.device("cpu")
         for st in self.opt.state.values():
             step = st.get("step")

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from pd_core.state import N_NEAR_PAD, NEAR_PAD_GAIN
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+_FUNCTIONS = {"tanh": torch.tanh, "relu": F.relu}
 
 
 class QNetwork(nn.Module):
@@ -37,6 +39,8 @@ class QNetwork(nn.Module):
             width = h
         layers.append(nn.Linear(width, n_actions))
         self.net = nn.Sequential(*layers)
+        self._linears: list[nn.Linear] = [m for m in layers if isinstance(m, nn.Linear)]
+        self._act = _FUNCTIONS[activation]
         self.n_inputs = n_inputs
         self.n_actions = n_actions
         self.hidden = tuple(hidden)
@@ -54,7 +58,16 @@ class QNetwork(nn.Module):
         return torch.cat([obs, fine], dim=-1)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net(self.inputs(obs))
+        """`self.net` on the inputs, each layer called as the function its module's forward
+        is (`F.linear`, then the activation): the same arithmetic without the module-call
+        machinery (hooks), a tenth of the network's time at the sizes training uses."""
+        h = self.inputs(obs)
+        last = self._linears[-1]
+        for lin in self._linears:
+            h = F.linear(h, lin.weight, lin.bias)
+            if lin is not last:
+                h = self._act(h)
+        return h
 
     def shape_metadata(self) -> dict:
         out = {
