@@ -7,11 +7,12 @@ worker and on every core, side by side in one run, with the ratios (issue 32).
    the layer itself (one demonstration per step).
 
 Both under the `standard` dispersions, the same episodes on 1 and on N workers (spawned
-processes; each worker's start-up, about 3 s, is counted), and with --address as Ray tasks
+processes; each worker's start-up, about 3 s, is counted; episodes go in chunks of 25, so give a
+multiple of 25 x workers or the last chunk idles a worker), and with --address as Ray tasks
 (`pd-train --address`; local: a local instance, its start counted in the first row).
 
     python bench/label_speed.py [--policy models/pd_dqn_ocp.pt] [--teacher mpc-fuel-reserve]
-                                [--episodes 40] [--workers N] [--address local|auto|host:port]
+                                [--episodes 50] [--workers N] [--address local|auto|host:port]
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--policy", default=str(ROOT / "models" / "pd_dqn_ocp.pt"))
     ap.add_argument("--teacher", default="mpc-fuel-reserve")
-    ap.add_argument("--episodes", type=int, default=40)
+    ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--dispersions", default="standard")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--address", default="", help="also on Ray: local, auto or host:port")
