@@ -34,7 +34,7 @@ import torch
 import torch.nn.functional as F
 
 from pd_core.dqn.agent import DQNAgent, concat_samples
-from pd_core.dqn.config import preset
+from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.device import WARMUP_STEPS, DeviceReplay, DeviceUpdate
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory
@@ -301,7 +301,7 @@ def env_steps_per_s(num_envs: int, seconds: float) -> float:
     return _per_s(step, seconds) * num_envs
 
 
-def per_tensor_agent(cfg) -> DQNAgent:
+def per_tensor_agent(cfg: TrainConfig) -> DQNAgent:
     """An agent whose update runs as the plain per-tensor loop did up to 2f59083: module
     calls, torch's CPU default Adam (a Python loop over tensors), the parameter lists walked
     every update, one `lerp_` per parameter for the average (the same bits as ours)."""
@@ -334,10 +334,10 @@ def recipe_update_report(seconds: float, blocks: int = 40) -> None:
     rng = np.random.default_rng(0)
     _mem, demo = _memories(rng)
     batches = [demo.sample(cfg.batch_agent + cfg.batch_demo, rng) for _ in range(50)]
-    agents = {}
-    for name in ("per-tensor loop (before)", "pd-train (DQNAgent)"):
-        torch.manual_seed(0)
-        agents[name] = per_tensor_agent(cfg) if name.startswith("per") else DQNAgent(cfg)
+    torch.manual_seed(0)
+    before_agent = per_tensor_agent(cfg)
+    torch.manual_seed(0)
+    agents = {"per-tensor loop (before)": before_agent, "pd-train (DQNAgent)": DQNAgent(cfg)}
     ms: dict[str, list[float]] = {k: [] for k in agents}
     t_end = time.perf_counter() + seconds * 4  # the first pass always runs
     while len(ms["pd-train (DQNAgent)"]) < blocks and time.perf_counter() < t_end:

@@ -59,8 +59,8 @@ class QNetwork(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """`self.net` on the inputs, each layer called as the function its module's forward
-        is (`F.linear`, then the activation): the same arithmetic without the module-call
-        machinery (hooks), a tenth of the network's time at the sizes training uses."""
+        is (`F.linear`, then the activation): the same arithmetic, to the bit, without the
+        module-call machinery (hooks)."""
         h = self.inputs(obs)
         last = self._linears[-1]
         for lin in self._linears:
