@@ -1,7 +1,7 @@
 """Where the fuel above the fuel-optimal landing goes, and how much of it a braking reserve costs
 (issue 10's nominal fuel target, <= 1.05x), in one run.
 
-    python bench/fuel_floor.py [--episodes 20] [--seed 0] [--agents models/pd_dqn_robust.pt ...]
+    python bench/fuel_floor.py [--episodes 20] [--seed 0] [--agents models/pd_dqn_ocp.pt ...]
 
 Part 1: the fuel-optimal landing (`pd_core.ocp.solve(objective="fuel")`, RL thrust limits) from the
 first `--episodes` nominal Table 3 initial states of seed `--seed`, with the vertical thrust capped
@@ -31,6 +31,7 @@ from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
 from pd_core.dynamics import mass_flow_kgps  # noqa: E402
 from pd_core.experiments.campaign import load_actor  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.runtime.policy_file import SHIPPED_POLICY  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402
 
 BANDS_M = (500.0, 20.0)  # part 2 splits each flight at these altitudes
@@ -68,7 +69,7 @@ def main() -> None:
     ap.add_argument(
         "--agents",
         nargs="+",
-        default=["models/pd_dqn_robust.pt", "controller:zemzev", "shield:controller:zemzev"],
+        default=[str(SHIPPED_POLICY), "controller:zemzev", "shield:controller:zemzev"],
         help="pd-eval agent specs flown in part 2",
     )
     a = ap.parse_args()

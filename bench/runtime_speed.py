@@ -36,10 +36,11 @@ from pd_core.experiments.campaign import metrics, run_campaign  # noqa: E402
 from pd_core.experiments.evaluate import rollout  # noqa: E402
 from pd_core.runtime import RuntimeConfig, load_policy  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
+from pd_core.runtime.policy_file import SHIPPED_POLICY  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ROOT / "models" / "pd_dqn_robust.pt"
+SHIPPED = ROOT / SHIPPED_POLICY
 
 
 def per_decision_us(call, states: np.ndarray, repeats: int) -> np.ndarray:

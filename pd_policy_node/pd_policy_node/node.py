@@ -45,7 +45,7 @@ import pd_core
 from pd_core.config import TABLE3
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import SHIELD_MODES, PolicyLoadError
+from pd_core.runtime.policy_file import SHIELD_MODES, SHIPPED_POLICY, PolicyLoadError
 from pd_core.state import check_state
 from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
 from pd_ros_common import diagnostics, names, params, qos
@@ -54,10 +54,7 @@ from pd_ros_common.run import run_node
 
 NODE_NAME = names.POLICY_NODE
 MODEL_ENV = "PD_MODEL_PATH"
-# The shipped policy (models/pd_dqn_robust.md says how it was trained and how it scores): it
-# lands as often as models/pd_dqn_best.pt on the nominal problem and far more often under the
-# dispersions a flight team tests (issue 10).
-SHIPPED_MODEL = Path("models") / "pd_dqn_robust.pt"
+SHIPPED_MODEL = SHIPPED_POLICY  # relative to the repository root (models/pd_dqn_ocp.md)
 DQN = "dqn"
 
 PARAMETERS: dict[str, tuple[Any, str]] = {

@@ -1,14 +1,19 @@
-"""models/pd_dqn_ocp (issue 32): the file names only optimal-control demonstrations and labels,
-starts from no other file, and flies behind the default runtime layer."""
+"""The policy flown by default, models/pd_dqn_ocp (issue 32): the file names only optimal-control
+demonstrations and labels, starts from no other file, and flies behind the default runtime
+layer."""
 
 import json
 from pathlib import Path
 
 from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.config import RuntimeConfig
-from pd_core.runtime.policy_file import load_policy
+from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_ocp"
+MODEL = (Path(__file__).resolve().parents[2] / SHIPPED_POLICY).with_suffix("")
+
+
+def test_the_default_policy_is_the_optimal_control_student() -> None:
+    assert MODEL.name == "pd_dqn_ocp"
 
 
 def test_every_demonstration_and_label_of_the_lineage_came_from_the_ocp_teacher() -> None:

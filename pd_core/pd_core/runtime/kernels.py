@@ -7,7 +7,7 @@ scores, the thrust-matrix Kalman step, the window sums, the navigation filter's 
 Kalman step with a closed-form 2x2 inverse, the propagation on the nominal dynamics of
 `pd_core.dynamics.step`, the vertical thrust scale, the three rules), in the order of operations
 of the numpy it replaced (three-term dot products as numpy's einsum sums them, `_dot3`): the
-shipped file flies the same actions to the bit on the `standard` campaign. The handover condition
+shipped files fly the same actions to the bit on the `standard` campaign. The handover condition
 repeats, for one lander, `braking_accel_mps2` and `lateral_brake_accel_mps2` of
 `pd_core.teachers.zemzev`. One decision of one lander costs microseconds instead of ~400 small
 numpy calls.

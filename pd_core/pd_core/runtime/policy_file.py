@@ -27,6 +27,10 @@ from pd_core.runtime.layer import Runtime
 from pd_core.runtime.network import NumpyQNetwork
 
 FORMAT_VERSION = 2
+SHIPPED_POLICY = Path("models") / "pd_dqn_ocp.pt"
+"""The policy flown when none is named (pd_policy_node, pd_demo, benches), relative to the
+repository root: the optimal-control student, trained from `mpc-fuel-reserve` alone by
+`scripts/train_recipe.sh --seed 1` (models/pd_dqn_ocp.md)."""
 SHIELD_MODES = ("file", "always", "never")
 """`load_policy(shield=...)`: the runtime config the file pins; the code's default runtime
 config (`RuntimeConfig()`); or none (`RuntimeConfig.off()`: the bare network)"""

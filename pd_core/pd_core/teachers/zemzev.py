@@ -44,7 +44,7 @@ class ZemZevParams:
     lateral_limit: bool = True  # slow the descent when the lateral axes need more time
     min_tgo_s: float = 3.0  # floor of t_go in the ZEM/ZEV gains
     # share of the coast before the braking profile counted in the lateral t_go (0: the braking
-    # time only, the law the shipped policy learnt from; 1: the whole time left). 1 saves 0.5 %
+    # time only, the law pd_dqn_robust learnt from; 1: the whole time left). 1 saves 0.5 %
     # of the nominal fuel (1.116x the optimum against 1.121x, bench/fuel_front.py): the lateral
     # thrusters already burn about what the optimum burns. Left at 0: a student would need
     # retraining on three seeds for it, and it does not bring the fuel near 1.05x
