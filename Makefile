@@ -15,7 +15,7 @@ help:
 	@echo "make demo       fly the lander (FAST=1 for the short version)"
 	@echo "make test       ruff check + ruff format --check + pytest tests/  (PYTEST_ARGS=...)"
 	@echo "make train      pd-train \$$(ARGS)"
-	@echo "make recipe     the 60 min training recipe, one seed (SEED=1; ARGS=--help for more)"
+	@echo "make recipe     the shipped policy's training recipe, one seed (SEED=1; ARGS=--help for more)"
 	@echo "make bench      run every bench/*.py"
 	@echo "make clean      remove ros2_ws build/install/log and caches (distclean: also .venv)"
 
@@ -43,7 +43,8 @@ demo: setup
 train: setup
 	$(IN_ENV) pd-train $(ARGS)
 
-# pd_dqn_robust.md's 60 min recipe: three pd-train stages, runs under runs/recipe__$(SEED)
+# The shipped policy's recipe (models/pd_dqn_ocp.md): two pd-train stages from the optimal-control
+# teacher, runs under runs/ocp__$(SEED); the policy is runs/ocp__$(SEED)/stage2/best.pt
 recipe: setup
 	$(IN_ENV) scripts/train_recipe.sh --seed $(or $(SEED),1) $(ARGS)
 

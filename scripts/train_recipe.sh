@@ -1,29 +1,20 @@
 #!/usr/bin/env bash
-# The 60 min training recipe of models/pd_dqn_robust.md, one seed, three pd-train stages:
-#   1. `best` preset from scratch (20 min);
-#   2. fine-tune under the `broad` dispersions from the zemzev-vernier teacher, behind the
-#      braking shield, with the landing bonus and the near-pad inputs (25 min, demonstrations
-#      included; stage 1's paper network is widened with zero weights on them);
-#   3. the same again from stage 2's best.pt (13.5 min, about 4 of them the recovery search;
-#      11 min before the clock counted the set-up, 3 seeds measured worse). The recipe's policy
-#      is stage 3's final.pt. In all about 59 min.
-#
-# With --teacher ocp (issue 32): every demonstration and label from the optimal-control teacher
-# mpc-fuel-reserve, from scratch, behind the runtime layer:
+# The training recipe of the shipped policy, one seed (models/pd_dqn_ocp.pt is its output for
+# seed 1). Every demonstration and label comes from the optimal-control teacher mpc-fuel-reserve,
+# from scratch, behind the runtime layer:
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction; 201,000
-#      gradient updates, evaluated every 10,000 (30 min on the machine of 11-27, 45 min on
-#      that of 11-29 with two torch threads);
+#      gradient updates, evaluated every 10,000;
 #   2. `ocp-dagger` preset from stage 1's best.pt, under the `broad` dispersions: 500 teacher
 #      episodes, then seven DAgger rounds (the initial network's and six more), each 500 new
 #      episodes flown by the current network and labelled by the teacher, aggregated, 20k
-#      pre-training updates after each; no interaction (35 min on 11-27, 52 min on 11-29 with
-#      two torch threads; the same file with one).
+#      pre-training updates after each; no interaction.
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
-#      on the machine's speed or load. The recipe's policy is stage 2's best.pt
-#      (models/pd_dqn_ocp.pt for seed 1).
+#      on the machine's speed, load or torch thread count (another CPU may give other bits).
+#      The recipe's policy is stage 2's best.pt. Wall time on two cores: 70 min (machine of
+#      11-27), 97 min (11-29), docs/experiments/2026-12-01-ocp-default.md for today's.
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
-# the demonstrations come from (--demonstrator, with --teacher ocp):
+# the demonstrations come from (--demonstrator):
 #   mpc-fuel-reserve  the recipe above (default);
 #   zemzev-vernier    the same two stages, ZEM/ZEV-vernier flying the demonstrations and labelling;
 #   open-loop         the paper's 33 open-loop OCP trajectories (data/demos_7x7x3.npz): one `ocp`
@@ -31,6 +22,13 @@
 #                     open-loop plans cannot label the student's states);
 #   none              no demonstrations: one `ocp` stage of 341,000 updates, interaction only.
 # Their run directories default to runs/ablation_<demonstrator>__S.
+#
+# --teacher zemzev-vernier: the older 60 min recipe of the ZEM/ZEV lineage (models/pd_dqn_robust.md
+# has the file that lineage shipped after ten hand-run rounds), three pd-train stages:
+#   1. `best` preset from scratch (20 min);
+#   2. fine-tune under `broad` from the zemzev-vernier teacher, behind the braking shield, with
+#      the landing bonus and the near-pad inputs (25 min, demonstrations included);
+#   3. the same again from stage 2's best.pt (13.5 min). Its policy is stage 3's final.pt.
 #
 # A stage whose run directory already holds final.pt is skipped, and one that holds only a
 # checkpoint is resumed (`pd-train --resume`, its wall time counted on), so an interrupted
@@ -44,15 +42,15 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                               [--dry-run] [-h]
 
   --seed S         training seed of every stage (default 1)
-  --out DIR        run directories DIR/stage1, DIR/stage2, DIR/stage3 (default runs/recipe__S)
-  --stage1 FILE    skip stage 1 and start stage 2 from this policy (e.g. models/pd_dqn_best.pt,
-                   a 20 min snapshot of stage 1 with seed 1)
-  --paper-inputs   fine-tune without the near-pad inputs (pd-train --near-pad): the recipe
-                   as it was before them, Eq. 21's 7 inputs only
-  --teacher T      zemzev-vernier (default: the recipe above) or ocp: the optimal-control
-                   teacher's recipe (demonstrations, then aggregated DAgger rounds; 70 min
-                   on the machine of 11-27, 98 min on that of 11-29; the policy is
-                   DIR/stage2/best.pt, default DIR runs/ocp__S)
+  --out DIR        run directories DIR/stage1, DIR/stage2 (default runs/ocp__S;
+                   --teacher zemzev-vernier: DIR/stage1..3, default runs/recipe__S)
+  --stage1 FILE    skip stage 1 and start stage 2 from this policy
+  --teacher T      ocp (default: the optimal-control teacher's recipe above, demonstrations
+                   then aggregated DAgger rounds; the policy is DIR/stage2/best.pt) or
+                   zemzev-vernier (the older ZEM/ZEV-lineage recipe; the policy is
+                   DIR/stage3/final.pt)
+  --paper-inputs   with --teacher zemzev-vernier, fine-tune without the near-pad inputs
+                   (pd-train --near-pad): Eq. 21's 7 inputs only
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
                    zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
                    recipe and budget (default DIR runs/ablation_D__S)
@@ -65,8 +63,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    with --threads 1
   --dry-run        print the pd-train command of each stage, one per line, and run nothing
 
-The policy is DIR/stage3/final.pt; evaluate it with
-  pd-eval DIR/stage3/final.pt --dispersions standard --episodes 1000
+The policy is DIR/stage2/best.pt (DIR/stage3/final.pt with --teacher zemzev-vernier);
+evaluate it with
+  pd-eval DIR/stage2/best.pt --dispersions standard --episodes 2000 --seed 0
 EOF
 }
 
@@ -75,7 +74,7 @@ out=""
 stage1=""
 dry=0
 threads=2
-teacher=zemzev-vernier
+teacher=ocp
 demonstrator=mpc-fuel-reserve
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do

@@ -35,9 +35,20 @@ def stage_configs(capsys, *args: str) -> list[dict]:
     return configs
 
 
-def test_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(tmp_path, capsys):
+def test_the_default_recipe_is_the_optimal_control_teachers(tmp_path, capsys):
+    out = str(tmp_path / "r")
+    assert stage_configs(capsys, "--out", out) == stage_configs(
+        capsys, "--teacher", "ocp", "--out", out
+    )
+    (s1, s2) = stage_configs(capsys)
+    assert (s1["run_dir"], s2["run_dir"]) == ("runs/ocp__1/stage1", "runs/ocp__1/stage2")
+
+
+def test_zemzev_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(tmp_path, capsys):
     out = tmp_path / "r"
-    s1, s2, s3 = stage_configs(capsys, "--seed", "7", "--out", str(out))
+    s1, s2, s3 = stage_configs(
+        capsys, "--teacher", "zemzev-vernier", "--seed", "7", "--out", str(out)
+    )
     assert s1["preset"] == "best" and s1["init_policy"] in ("", None)
     for cfg in (s2, s3):
         assert cfg["preset"] == "robust" and cfg["controller"] == "zemzev-vernier"
@@ -117,13 +128,18 @@ def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path
 def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
     start = tmp_path / "start.pt"
     start.write_bytes(b"")
-    s2, s3 = stage_configs(capsys, "--stage1", str(start), "--out", str(tmp_path / "r"))
+    (s2,) = stage_configs(capsys, "--stage1", str(start), "--out", str(tmp_path / "r"))
+    assert s2["init_policy"] == str(start) and s2["preset"] == "ocp-dagger"
+    zv = ("--teacher", "zemzev-vernier")
+    s2, s3 = stage_configs(capsys, *zv, "--stage1", str(start), "--out", str(tmp_path / "z"))
     assert s2["init_policy"] == str(start)
-    assert s3["init_policy"] == f"{tmp_path}/r/stage2/best.pt"
+    assert s3["init_policy"] == f"{tmp_path}/z/stage2/best.pt"
 
 
 def test_paper_inputs_fine_tune_without_the_near_pad_inputs(tmp_path, capsys):
-    configs = stage_configs(capsys, "--paper-inputs", "--out", str(tmp_path / "r"))
+    configs = stage_configs(
+        capsys, "--teacher", "zemzev-vernier", "--paper-inputs", "--out", str(tmp_path / "r")
+    )
     assert [c["near_pad"] for c in configs] == [False, False, False]
 
 
@@ -132,6 +148,10 @@ def test_finished_stages_are_skipped(tmp_path):
         (tmp_path / f"stage{k}").mkdir()
         (tmp_path / f"stage{k}" / "final.pt").write_bytes(b"")
     out = recipe("--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("exists, skipped") == 2
+    assert f"{tmp_path}/stage2/best.pt" in out.stdout.splitlines()[-1]
+    out = recipe("--teacher", "zemzev-vernier", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr
     assert out.stdout.count("exists, skipped") == 3
     assert f"{tmp_path}/stage3/final.pt" in out.stdout.splitlines()[-1]
@@ -144,11 +164,11 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
     (tmp_path / "stage2" / "checkpoint.pt").write_bytes(b"not a checkpoint")
     out = recipe("--out", str(tmp_path))
     # stage 1 is skipped, stage 2 goes to `pd-train --resume`, which refuses the broken file
-    # in one line, and the recipe stops there (stage 3 never starts)
+    # in one line, and the recipe stops there
     assert out.returncode == 2
     assert "stage1/final.pt exists, skipped" in out.stdout
     assert f"pd-train --resume {tmp_path}/stage2" in out.stdout
-    assert "stage3" not in out.stdout
+    assert "recipe done" not in out.stdout
     assert "cannot resume" in out.stderr
 
 
@@ -160,7 +180,7 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--stage1", "/nonexistent.pt"], "--stage1 file not found"),
         (["--teacher", "zemzev"], "--teacher must be zemzev-vernier or ocp"),
         (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel-reserve"),
-        (["--demonstrator", "none"], "--demonstrator needs --teacher ocp"),
+        (["--teacher", "zemzev-vernier", "--demonstrator", "none"], "needs --teacher ocp"),
         (["--threads", "0"], "--threads must be a positive integer"),
     ],
 )
