@@ -88,6 +88,15 @@ def start_stack(sup: Supervisor, args: argparse.Namespace, bag: Path) -> None:
     sup.start("pd_record", [executable("pd_bringup", "pd_record"), "-o", str(bag)])
 
 
+def flown_by(sup: Supervisor) -> str:
+    """What pd_policy_node said it flies: its "policy ready:" line, up to the network's shape."""
+    policy = next(c for c in sup.children if c.name == "pd_policy_node")
+    for line in policy.log().splitlines():
+        if "policy ready: " in line:
+            return line.split("policy ready: ", 1)[1].split(" (", 1)[0]
+    return "(not said in its log)"
+
+
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("out") / datetime.now().strftime("demo-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
@@ -108,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         # still lag its client (pd_ros_common.session.wait_for_server)
         flight.spin_for(SERVICE_SETTLE_S)
         print(f"pd_demo: 4 processes up after {time.monotonic() - t_start:.1f} s", flush=True)
+        print(f"  policy: {flown_by(sup)}", flush=True)
 
         episode, s0 = flight.reset(args.seed)
         print(f"  episode {episode} flying ({mode}) from x = {_fmt(s0[0:3])} m, "

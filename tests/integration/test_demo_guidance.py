@@ -1,6 +1,6 @@
 """`make demo`'s main job, run as users run it (`pd_demo --fast`): the bag holds one
 GuidanceStatus per command, and who decided, counted in the bag, equals the policy node's own
-statistics line."""
+statistics line. Without --model it flies, and names, the shipped policy file."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from helpers import executable
 
 from pd_bringup.bag import read_bag
 from pd_bringup.guidance import bag_counts, node_counts
+from pd_core.runtime.policy_file import SHIPPED_POLICY
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 
@@ -36,3 +37,5 @@ def test_the_demo_bag_says_who_decided_each_command_as_the_node_counts(tmp_path)
     log = (tmp_path / "logs" / "pd_policy_node.log").read_text()
     assert node_counts(log) == in_bag, log[-2000:]
     assert "equal to the policy node's count" in out.stdout, out.stdout[-2000:]
+    flown = next(x for x in out.stdout.splitlines() if x.startswith("  policy: "))[10:]
+    assert flown.endswith(str(SHIPPED_POLICY)) and f"policy ready: {flown} (" in log, flown
