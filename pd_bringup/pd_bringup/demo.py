@@ -58,6 +58,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--out", type=Path, default=None, help="output folder (default out/demo-<time>)")
     p.add_argument("--method", default="", help="OCP method (default: pd_ocp_node's)")
+    p.add_argument(
+        "--objective",
+        choices=("energy", "fuel"),
+        default="energy",
+        help="the OCP landing flown beside the policy: energy (Eq. 4, the paper's) or fuel "
+        "(the fuel-optimal landing the shipped policy's teacher plans)",
+    )
     return p.parse_args(own)
 
 
@@ -123,8 +130,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  episode {episode} flying ({mode}) from x = {_fmt(s0[0:3])} m, "
               f"v = {_fmt(s0[3:6])} m/s, m = {s0[6]:.1f} kg", flush=True)  # fmt: skip
         t_fly = time.monotonic()
-        ocp = flight.solve_ocp(s0, method=args.method)
-        print_ocp(ocp)
+        ocp = flight.solve_ocp(s0, method=args.method, objective=args.objective)
+        print_ocp(ocp, args.objective)
         budget = 60.0 if args.fast else MAX_EPISODE_TIME_S + 30.0
         result = flight.result_of(episode, budget, sup.check_alive)
         wall = time.monotonic() - t_fly
@@ -136,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         sup.stop_all(first="pd_record")  # the recorder first: it closes the bag
         if flight is not None:
             flight.close()
-    print_report(result, ocp, wall)
+    print_report(result, ocp, wall, args.objective)
     recorded = read_bag(bag)
     counts = {t: 0 for t in recorded.topics}
     for topic, _, _ in recorded.messages:
@@ -180,20 +187,20 @@ def _fmt(v: np.ndarray, nd: int = 2) -> str:
     return "[" + ", ".join(f"{x:.{nd}f}" for x in v) + "]"
 
 
-def print_ocp(ocp: Any) -> None:
+def print_ocp(ocp: Any, objective: str) -> None:
     if not ocp.success:
-        print(f"  OCP: no trajectory ({ocp.message})", flush=True)
+        print(f"  OCP ({objective}): no trajectory ({ocp.message})", flush=True)
         return
     end = FlightClient.ocp_arrays(ocp)["states"][-1]
     print(
-        f"  OCP: {ocp.message}; time of flight {ocp.time_of_flight:.1f} s, fuel "
+        f"  OCP ({objective}): {ocp.message}; time of flight {ocp.time_of_flight:.1f} s, fuel "
         f"{ocp.fuel:.1f} kg, solved in {ocp.solve_time:.2f} s; final |x| "
         f"{np.linalg.norm(end[0:3]):.3g} m, |v| {np.linalg.norm(end[3:6]):.3g} m/s",
         flush=True,
     )
 
 
-def print_report(result: Any, ocp: Any, wall: float) -> None:
+def print_report(result: Any, ocp: Any, wall: float, objective: str) -> None:
     end = final_state(result)
     print(
         f"\nTouchdown after {result.time_of_flight:.1f} s simulated ({result.steps} steps, "
@@ -207,7 +214,7 @@ def print_report(result: Any, ocp: Any, wall: float) -> None:
     print(f"  mass     {result.final_mass:.1f} kg")
     if ocp.success:
         print(
-            f"  fuel     {result.fuel:.1f} kg  vs OCP {ocp.fuel:.1f} kg "
+            f"  fuel     {result.fuel:.1f} kg  vs OCP ({objective}) {ocp.fuel:.1f} kg "
             f"({100.0 * (result.fuel / ocp.fuel - 1.0):+.1f} %)"
         )
     else:

@@ -1,6 +1,7 @@
 """`make demo`'s main job, run as users run it (`pd_demo --fast`): the bag holds one
 GuidanceStatus per command, and who decided, counted in the bag, equals the policy node's own
-statistics line. Without --model it flies, and names, the shipped policy file."""
+statistics line. Without --model it flies, and names, the shipped policy file; with --objective
+fuel it sets the flight beside the fuel-optimal landing."""
 
 from __future__ import annotations
 
@@ -20,7 +21,14 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240
 def test_the_demo_bag_says_who_decided_each_command_as_the_node_counts(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}  # it claims its own
     out = subprocess.run(
-        [executable("pd_bringup", "pd_demo"), "--fast", "--out", str(tmp_path)],
+        [
+            executable("pd_bringup", "pd_demo"),
+            "--fast",
+            "--objective",
+            "fuel",
+            "--out",
+            str(tmp_path),
+        ],
         env=env,
         capture_output=True,
         text=True,
@@ -39,3 +47,7 @@ def test_the_demo_bag_says_who_decided_each_command_as_the_node_counts(tmp_path)
     assert "equal to the policy node's count" in out.stdout, out.stdout[-2000:]
     flown = next(x for x in out.stdout.splitlines() if x.startswith("  policy: "))[10:]
     assert flown.endswith(str(SHIPPED_POLICY)) and f"policy ready: {flown} (" in log, flown
+    fuel = next(x for x in out.stdout.splitlines() if x.startswith("  fuel "))
+    # the fuel-optimal landing burns less than any guidance flown on 0.2 s steps
+    ratio = float(fuel.split("(")[-1].split("%")[0])
+    assert "vs OCP (fuel)" in fuel and 0.0 < ratio < 20.0, fuel
