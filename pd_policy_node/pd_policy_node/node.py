@@ -54,7 +54,6 @@ from pd_ros_common.run import run_node
 
 NODE_NAME = names.POLICY_NODE
 MODEL_ENV = "PD_MODEL_PATH"
-SHIPPED_MODEL = SHIPPED_POLICY  # relative to the repository root (models/pd_dqn_ocp.md)
 DQN = "dqn"
 
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -67,8 +66,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "model_path": (
         "",
         "Policy file (<name>.pt with <name>.json beside it) of the 'dqn' controller. Empty = "
-        f"the shipped model: ${MODEL_ENV} if set, else $PD_ROOT/{SHIPPED_MODEL} (PD_ROOT is "
-        f"set by env.sh), else {SHIPPED_MODEL} in the source tree the package runs from.",
+        f"the shipped model: ${MODEL_ENV} if set, else $PD_ROOT/{SHIPPED_POLICY} (PD_ROOT is "
+        f"set by env.sh), else {SHIPPED_POLICY} in the source tree the package runs from.",
     ),
     "shield": (
         "file",
@@ -104,8 +103,8 @@ def default_model_path() -> Path:
         return Path(os.environ[MODEL_ENV])
     candidates: list[Path] = []
     if os.environ.get("PD_ROOT"):
-        candidates.append(Path(os.environ["PD_ROOT"]) / SHIPPED_MODEL)
-    candidates += [parent / SHIPPED_MODEL for parent in Path(__file__).resolve().parents]
+        candidates.append(Path(os.environ["PD_ROOT"]) / SHIPPED_POLICY)
+    candidates += [parent / SHIPPED_POLICY for parent in Path(__file__).resolve().parents]
     for c in candidates:
         if c.is_file():
             return c
