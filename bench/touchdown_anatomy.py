@@ -6,8 +6,9 @@ fallback in its last 2 s) would command on the same true states.
                                       [--campaign standard] [--episodes 2000] [--seed 0]
                                       [--last-s 2.0] [--show 3]
 
-Flies the scenario's episodes as `pd-eval --dispersions CAMPAIGN` does (episode i on seed
-seed + i, in chunks of 1024: the same flights), recording every decision (`Runtime.step_rows`).
+Flies the scenario's episodes through `pd_core.experiments.evaluate.rollout`, as `pd-eval
+--dispersions CAMPAIGN` does (episode i on seed seed + i: the same flights), recording every
+decision (`Runtime.step_rows`).
 For the failed and the landed episodes it prints, over the last `--last-s` seconds: the median
 lateral and vertical speed at touchdown; the share of steps on which the flown lateral command
 brakes the lateral velocity (opposes it on an axis moving faster than 0.2 m/s), is zero, or
@@ -18,60 +19,54 @@ Then the last steps of the first `--show` failures, step by step.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S
-from pd_core.dispersions import load_scenarios
-from pd_core.experiments.evaluate import CHUNK_EPISODES
+from pd_core.dispersions import Dispersions, load_scenarios
+from pd_core.experiments.evaluate import rollout
 from pd_core.runtime.decision import SOURCES
+from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
 from pd_core.teachers.registry import make_controller
-from pd_core.vector_env import make_vector_env
 
 MOVING_MPS = 0.2  # a lateral axis faster than this is "moving" for the braking share
 
 
-def fly(policy: str, scenario: object, episodes: int, seed: int) -> list[dict[str, np.ndarray]]:
+class DecisionLog:
+    """`Runtime.step_rows` behind the row-wise actor interface `rollout` flies, keeping the
+    proposed action and who decided for every row of every chunk."""
+
+    def __init__(self, rt: Runtime) -> None:
+        self.rt = rt
+        self.chunks: list[list[list[tuple[int, int]]]] = []
+
+    def begin_episodes(self, n: int) -> None:
+        self.rt.begin_episodes(n)
+        self.chunks.append([[] for _ in range(n)])
+
+    def act_rows(self, states: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        actions, dec = self.rt.step_rows(states, rows)
+        rec = self.chunks[-1]
+        for b, i in enumerate(rows):
+            rec[i].append((int(dec.proposed[b]), int(dec.source[b])))
+        return actions
+
+
+def fly(policy: str, scenario: Dispersions, episodes: int, seed: int) -> list[dict[str, Any]]:
     """Per episode: true states (T+1, 7), flown and proposed actions (T,), sources (T,), landed."""
-    rt = load_policy(policy)
-    out: list[dict[str, np.ndarray]] = []
-    for start in range(0, episodes, CHUNK_EPISODES):
-        n = min(CHUNK_EPISODES, episodes - start)
-        env = make_vector_env(n, autoreset=False, dispersions=scenario)
-        _, info = env.reset(seed=seed + start)
-        rt.begin_episodes(n)
-        states = [[info["state"][i].copy()] for i in range(n)]
-        rec: list[list[tuple[int, int, int]]] = [[] for _ in range(n)]
-        landed = np.zeros(n, dtype=bool)
-        observed, active = info["observed_state"], env.active
-        actions = np.zeros(n, dtype=np.int64)
-        while active.any():
-            rows = np.flatnonzero(active)
-            acts, dec = rt.step_rows(observed[rows], rows)
-            actions[rows] = acts
-            _, _, _, _, info = env.step(actions)
-            landed |= info["landed"]
-            for b, i in enumerate(rows):
-                states[i].append(info["state"][i].copy())
-                rec[i].append((int(acts[b]), int(dec.proposed[b]), int(dec.source[b])))
-            observed, active = info["observed_state"], info["active"]
-        for i in range(n):
-            r = np.array(rec[i], dtype=np.int64).reshape(-1, 3)
-            out.append(
-                {
-                    "states": np.array(states[i]),
-                    "action": r[:, 0],
-                    "proposed": r[:, 1],
-                    "source": r[:, 2],
-                    "landed": bool(landed[i]),
-                }
-            )
-    return out
+    log = DecisionLog(load_policy(policy))
+    ro = rollout(log, episodes, seed, dispersions=scenario, keep_trajectories=episodes)
+    decided = [np.array(r, dtype=np.int64).reshape(-1, 2) for c in log.chunks for r in c]
+    return [
+        {"states": x, "action": a, "proposed": d[:, 0], "source": d[:, 1], "landed": bool(ok)}
+        for x, a, d, ok in zip(ro.trajectories, ro.actions, decided, ro.landed, strict=True)
+    ]
 
 
-def tail_stats(eps: list[dict[str, np.ndarray]], steps: int, vernier: object) -> dict[str, float]:
+def tail_stats(eps: list[dict[str, Any]], steps: int, vernier: object) -> dict[str, float]:
     """Shares over the last `steps` decisions of each episode, and touchdown speeds."""
     levels = DEFAULT_ACTIONS.level_table
     mid = (np.array(DEFAULT_ACTIONS.n_per_axis[:2]) - 1) // 2
@@ -82,7 +77,8 @@ def tail_stats(eps: list[dict[str, np.ndarray]], steps: int, vernier: object) ->
     for e in eps:
         s = e["states"][:-1][-steps:]
         a = e["action"][-steps:]
-        lv = levels[a][:, :2] - mid  # signed lateral levels, 0 = no thrust
+        flown = levels[a][:, :2]
+        lv = flown - mid  # signed lateral levels, 0 = no thrust
         v = s[:, 3:5]
         moving = np.abs(v) > MOVING_MPS
         opposes = moving & (np.sign(lv) == -np.sign(v)) & (lv != 0)
@@ -90,7 +86,7 @@ def tail_stats(eps: list[dict[str, np.ndarray]], steps: int, vernier: object) ->
         brake += int(opposes.any(axis=1).sum())
         push += int((pushes.any(axis=1) & ~opposes.any(axis=1)).sum())
         zero += int((lv == 0).all(axis=1).sum())
-        same += int((levels[a][:, :2] == levels[vernier.act_batch(s)][:, :2]).all(axis=1).sum())
+        same += int((flown == levels[vernier.act_batch(s)][:, :2]).all(axis=1).sum())
         src += np.bincount(e["source"][-steps:], minlength=len(SOURCES))
         n += len(a)
         end = e["states"][-1]
@@ -109,7 +105,7 @@ def tail_stats(eps: list[dict[str, np.ndarray]], steps: int, vernier: object) ->
     }
 
 
-def show(e: dict[str, np.ndarray], steps: int, vernier: object) -> None:
+def show(e: dict[str, Any], steps: int, vernier: object) -> None:
     levels = DEFAULT_ACTIONS.level_table
     s = e["states"][:-1][-steps:]
     print(f"{'z m':>7} {'vx':>6} {'vy':>6} {'vz':>6}  flown  proposed  vernier  by")
