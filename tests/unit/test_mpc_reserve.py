@@ -22,7 +22,7 @@ from pd_core.ocp.fuel import (
 from pd_core.ocp.lp import LPSolver, solve_lp
 from pd_core.ocp.model import KN
 from pd_core.ocp.qp import _kkt_solve
-from pd_core.teachers.mpc import MPCController, brake_limited
+from pd_core.teachers.mpc import MPCController, brake_limited, time_to_rest_s
 from pd_core.teachers.registry import CONTROLLERS, RESERVE_PARAMS, make_controller
 
 T_MAX_N = float(RL_THRUST.max_n[2])
@@ -214,3 +214,29 @@ def test_lateral_settle_ends_the_horizontal_motion_before_the_plan_ends() -> Non
     assert np.abs(states[before_end, 0:2]).max() < 0.5
     assert np.abs(states[before_end, 3:5]).max() < 0.1
     assert fl.fuel < 1.01 * pb.fly(free, g).fuel
+
+
+def test_time_to_rest_is_an_even_brake_to_the_gate() -> None:
+    s = np.array([0.0, 0.0, 4.5, 1.0, 0.0, -2.0, 1800.0])
+    assert time_to_rest_s(s, 0.5) == pytest.approx(4.0)  # 2 x 4 m / 2 m/s
+    assert time_to_rest_s(s, 5.0) == 0.0  # below the gate: now
+    climbing = s.copy()
+    climbing[5] = 0.5
+    assert time_to_rest_s(climbing, 0.5) == np.inf
+
+
+def test_state_handover_answers_the_same_from_a_state_whatever_the_plan() -> None:
+    """With `handover_from_state` the fallback's answer near the pad depends on the state alone:
+    a cold teacher and one that has flown a whole plan to the same state agree with the law."""
+    ctl = make_controller("mpc-fuel-reserve-state")
+    assert isinstance(ctl, MPCController) and ctl.params.handover_from_state
+    law = ctl.fallback
+    # 2.3 m above the gate at 2.8 m/s: 1.6 s to rest, inside the 2 s hand-over
+    near = np.array([-3.0, 0.0, 2.8, 2.5, 0.0, -2.8, 1750.0])
+    assert time_to_rest_s(near, ctl.params.gate_altitude_m) < ctl.params.terminal_time_s
+    assert ctl.first_action(near) == int(law.act_batch(near[None])[0])
+    # the reserve teacher's own rule keys the hand-over on its plan's clock, so from the same
+    # state cold it plans on (here: coasts towards the pad), where the law brakes
+    old = make_controller("mpc-fuel-reserve")
+    lv = DEFAULT_ACTIONS.level_table
+    assert lv[old.first_action(near)][0] == 3 and lv[ctl.first_action(near)][0] < 3

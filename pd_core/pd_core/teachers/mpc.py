@@ -117,6 +117,9 @@ class MPCParams:
     # in the seconds the fallback flies); 0: off (see `fuel_lp_plan`)
     lateral_settle_s: float = 0.0
     terminal_altitude_m: float = 0.5  # ... or below this height above the gate
+    # the time-to-go above is the state's (`time_to_rest_s`: braking evenly to rest at the
+    # gate), not the plan's: the hand-over is then a function of the state a student sees
+    handover_from_state: bool = False
     # "eq5" (reference carried), "eq5-replan" (reference reset each step) or "nearest" (the
     # nearest level, not the paper's; measured beside them in bench/mpc_speed.py)
     rounding: str = "eq5"
@@ -292,7 +295,10 @@ class MPCController:
     def _plan(self, row: _Row, s: np.ndarray) -> tuple[np.ndarray, float] | None:
         """(control points (n, 3) N, t_go s) from s, or None: the fallback flies this step."""
         p = self.params
-        near_end = row.p is not None and row.t_go - DT_S < p.terminal_time_s
+        if p.handover_from_state:
+            near_end = time_to_rest_s(s, p.gate_altitude_m) < p.terminal_time_s
+        else:
+            near_end = row.p is not None and row.t_go - DT_S < p.terminal_time_s
         row.terminal |= bool(s[2] - p.gate_altitude_m < p.terminal_altitude_m) or near_end
         if row.terminal:
             return None
@@ -450,3 +456,10 @@ def brake_limited(
     if touchdown_speed_mps > 0.0 and z <= 0.0:
         return bool(s[5] ** 2 - 2.0 * a_z * max(s[2], 0.0) > touchdown_speed_mps**2)
     return bool(-vz > math.sqrt(land_speed_mps**2 + 2.0 * a_max * max(z, 0.0)))
+
+
+def time_to_rest_s(s: np.ndarray, gate_altitude_m: float) -> float:
+    """Seconds to come to rest at the gate from state s braking evenly: 2 h / |vz| for a
+    descent of h m above the gate (inf while climbing or hovering)."""
+    h = max(float(s[2]) - gate_altitude_m, 0.0)
+    return 2.0 * h / -float(s[5]) if s[5] < 0.0 else math.inf

@@ -9,6 +9,7 @@ vertical reserve (`reserve_controller`, issue 32).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 from pd_core import ocp
 from pd_core.teachers.mpc import Actor, MPCController, MPCParams
@@ -60,6 +61,15 @@ def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> M
     return ctl
 
 
+def _reserve_state() -> MPCController:
+    """`mpc-fuel-reserve` handing over to its fallback on the state's time-to-go."""
+    ctl = reserve_controller(
+        ZemZevController(VERNIER_PARAMS), replace(RESERVE_PARAMS, handover_from_state=True)
+    )
+    ctl.name = "mpc-fuel-reserve-state"
+    return ctl
+
+
 def _mpc(objective: str) -> Callable[[], MPCController]:
     return lambda: mpc_controller(objective, fallback=ZemZevController())
 
@@ -71,6 +81,7 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "mpc-fuel": _mpc("fuel"),
     "mpc-energy": _mpc("energy"),
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
+    "mpc-fuel-reserve-state": lambda: _reserve_state(),
 }
 CONTROLLERS = tuple(FACTORIES)
 
