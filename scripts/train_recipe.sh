@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The training recipe of the shipped policy, one seed (models/pd_dqn_ocp.pt is its output for
-# seed 1). Every demonstration and label comes from the optimal-control teacher mpc-fuel-reserve,
-# from scratch, behind the runtime layer:
+# seed 1). Every demonstration and label comes from the optimal-control teacher
+# mpc-fuel-reserve-state (the fuel teacher that keeps the layer's reserve and hands its last 2 s
+# to its fallback on the state's time-to-go), from scratch, behind the runtime layer:
 #   1. `ocp` preset: teacher-flown demonstrations, DQfD pre-training, interaction; 201,000
 #      gradient updates, evaluated every 10,000;
 #   2. `ocp-dagger` preset from stage 1's best.pt, under the `broad` dispersions: 500 teacher
@@ -10,12 +11,15 @@
 #      pre-training updates after each; no interaction.
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
 #      on the machine's speed, load or torch thread count (another CPU may give other bits).
-#      The recipe's policy is stage 2's best.pt. Wall time on two cores: 70 min (machine of
-#      11-27), 97 min (11-29), docs/experiments/2026-12-01-ocp-default.md for today's.
+#      The recipe's policy is stage 2's best.pt. Wall time on two cores: 47.5 min with
+#      mpc-fuel-reserve (machine of 12-01, docs/experiments/2026-12-01-ocp-default.md), about
+#      60 min with mpc-fuel-reserve-state beside other work (2026-12-02-state-handover.md).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
-#   mpc-fuel-reserve  the recipe above (default);
+#   mpc-fuel-reserve-state  the recipe above (default);
+#   mpc-fuel-reserve  the same two stages with the teacher handing over on its plan's clock
+#                     (the recipe until 2026-12-02);
 #   zemzev-vernier    the same two stages, ZEM/ZEV-vernier flying the demonstrations and labelling;
 #   open-loop         the paper's 33 open-loop OCP trajectories (data/demos_7x7x3.npz): one `ocp`
 #                     stage of the recipe's 341,000 gradient updates (201,000 + 7 x 20,000;
@@ -51,8 +55,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    DIR/stage3/final.pt)
   --paper-inputs   with --teacher zemzev-vernier, fine-tune without the near-pad inputs
                    (pd-train --near-pad): Eq. 21's 7 inputs only
-  --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve (default),
-                   zemzev-vernier, open-loop (the paper's 33 trajectories) or none; the same
+  --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve-state
+                   (default), mpc-fuel-reserve, zemzev-vernier, open-loop (the paper's 33
+                   trajectories) or none; the same
                    recipe and budget (default DIR runs/ablation_D__S)
   --threads N      torch threads of each stage (default 2: one seed on two cores; give 1 to
                    train two seeds side by side). With --teacher ocp the files are the same
@@ -75,7 +80,7 @@ stage1=""
 dry=0
 threads=2
 teacher=ocp
-demonstrator=mpc-fuel-reserve
+demonstrator=mpc-fuel-reserve-state
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
     case "$1" in
@@ -96,11 +101,11 @@ done
 [[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
 [[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
 case "$demonstrator" in
-    mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
-    *) echo "train_recipe.sh: --demonstrator must be mpc-fuel-reserve, zemzev-vernier, open-loop or none, got '$demonstrator'" >&2; exit 2 ;;
+    mpc-fuel-reserve-state | mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
+    *) echo "train_recipe.sh: --demonstrator must be mpc-fuel-reserve-state, mpc-fuel-reserve, zemzev-vernier, open-loop or none, got '$demonstrator'" >&2; exit 2 ;;
 esac
-[[ "$demonstrator" == mpc-fuel-reserve || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
-if [[ "$teacher" == ocp && "$demonstrator" != mpc-fuel-reserve ]]; then
+[[ "$demonstrator" == mpc-fuel-reserve-state || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
+if [[ "$teacher" == ocp && "$demonstrator" != mpc-fuel-reserve-state ]]; then
     out="${out:-runs/ablation_${demonstrator}__$seed}"
 elif [[ "$teacher" == ocp ]]; then
     out="${out:-runs/ocp__$seed}"
@@ -149,7 +154,7 @@ if [[ "$teacher" == ocp && ( "$demonstrator" == open-loop || "$demonstrator" == 
 fi
 if [[ "$teacher" == ocp ]]; then
     arm=()
-    [[ "$demonstrator" == zemzev-vernier ]] && arm=(--controller zemzev-vernier)
+    [[ "$demonstrator" != mpc-fuel-reserve-state ]] && arm=(--controller "$demonstrator")
     if [[ -z "$stage1" ]]; then
         stage stage1 --preset ocp "${arm[@]}"
         stage1="$out/stage1/best.pt"

@@ -71,7 +71,7 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_on_an_update_bu
     stages = stage_configs(capsys, "--teacher", "ocp", "--out", str(out))
     assert [c["preset"] for c in stages] == ["ocp", "ocp-dagger"]
     for cfg in stages:
-        assert cfg["controller"] == "mpc-fuel-reserve" and cfg["demos"] == ""
+        assert cfg["controller"] == "mpc-fuel-reserve-state" and cfg["demos"] == ""
         assert cfg["shield"] is True
     # stage 1 learns the `standard` dispersions; the DAgger rounds fly and label `broad`
     assert [c["dispersions"] for c in stages] == ["standard", "broad"]
@@ -98,11 +98,19 @@ def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path
     zv = stage_configs(
         capsys, "--teacher", "ocp", "--demonstrator", "zemzev-vernier", "--out", str(tmp_path / "z")
     )
-    # ZEM/ZEV-vernier: the same two stages, it flies the demonstrations and labels
+    clock = stage_configs(
+        capsys, "--teacher", "ocp", "--demonstrator", "mpc-fuel-reserve", "--out", str(tmp_path)
+    )
+    # ZEM/ZEV-vernier or the teacher handing over on its plan's clock (the recipe until
+    # 2026-12-02): the same two stages, it flies the demonstrations and labels
     assert [c["controller"] for c in zv] == ["zemzev-vernier", "zemzev-vernier"]
+    assert [c["controller"] for c in clock] == ["mpc-fuel-reserve", "mpc-fuel-reserve"]
     ignore = {"controller", "run_dir", "init_policy"}
-    for a, b in zip(base, zv, strict=True):
+    for a, b, c in zip(base, zv, clock, strict=True):
         assert {k: v for k, v in a.items() if k not in ignore} == {
+            k: v for k, v in b.items() if k not in ignore
+        }
+        assert {k: v for k, v in c.items() if k not in ignore} == {
             k: v for k, v in b.items() if k not in ignore
         }
     (paper,) = stage_configs(capsys, "--teacher", "ocp", "--demonstrator", "open-loop")
@@ -179,7 +187,7 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--bogus"], "unknown argument '--bogus'"),
         (["--stage1", "/nonexistent.pt"], "--stage1 file not found"),
         (["--teacher", "zemzev"], "--teacher must be zemzev-vernier or ocp"),
-        (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel-reserve"),
+        (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel"),
         (["--teacher", "zemzev-vernier", "--demonstrator", "none"], "needs --teacher ocp"),
         (["--threads", "0"], "--threads must be a positive integer"),
     ],

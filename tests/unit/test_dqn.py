@@ -330,10 +330,10 @@ def test_config_flags_and_presets():
     assert set(PRESETS) == {"paper-agent1", "paper-agent2", "best", "robust", "ocp", "ocp-dagger"}
     # issue 32: from scratch, and every demonstration from the optimal-control teacher
     ocp = preset("ocp")
-    assert ocp.init_policy == "" and ocp.demos == "" and ocp.controller == "mpc-fuel-reserve"
+    assert ocp.init_policy == "" and ocp.demos == "" and ocp.controller == "mpc-fuel-reserve-state"
     assert ocp.controller_demo_episodes > 0 and ocp.shield and ocp.batch_demo > 0
     dagger = preset("ocp-dagger")  # its rounds label with the same teacher, no other source
-    assert dagger.controller == "mpc-fuel-reserve" and dagger.demos == ""
+    assert dagger.controller == "mpc-fuel-reserve-state" and dagger.demos == ""
     assert dagger.dagger_rounds > 0 and dagger.label_episodes > 0
     robust = preset("robust")
     assert robust.init_policy == "models/pd_dqn_best.pt" and robust.dispersions == "standard"

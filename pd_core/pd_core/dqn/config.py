@@ -2,9 +2,9 @@
 
 Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200),
 `best` (what won our comparisons on the nominal problem), `robust` (issue 10: trained under
-dispersions from ZEM/ZEV demonstrations; see models/<name>.md) and `ocp` (issue 32: from scratch,
-demonstrations of the optimal-control teacher `mpc-fuel-reserve` only). Flags given on the command
-line override the preset.
+dispersions from ZEM/ZEV demonstrations; see models/<name>.md) and `ocp` (issue 32: from
+scratch, demonstrations of the optimal-control teacher `mpc-fuel-reserve-state` only). Flags given
+on the command line override the preset.
 """
 
 from __future__ import annotations
@@ -239,8 +239,9 @@ PRESETS["robust"] = {
 }
 
 # Ours for issue 32: learns from the optimal-control teacher only, from scratch. Demonstrations
-# flown by mpc-fuel-reserve behind the runtime layer under the `standard` dispersions (those that
-# landed), DQfD pre-training on them, then interaction; no ZEM/ZEV episode, no starting weights.
+# flown by mpc-fuel-reserve-state behind the runtime layer under the `standard` dispersions
+# (those that landed), DQfD pre-training on them, then interaction; no ZEM/ZEV episode, no
+# starting weights.
 # Budgeted and evaluated by gradient updates, not wall time, so a seed's file does not depend
 # on the machine's speed or load: 201,000 updates is what 30 min gave seed 1 on the 2-core
 # reference machine.
@@ -248,7 +249,7 @@ PRESETS["ocp"] = {
     **PRESETS["best"],
     "near_pad": True,
     "dispersions": "standard",
-    "controller": "mpc-fuel-reserve",
+    "controller": "mpc-fuel-reserve-state",
     "controller_demo_episodes": 1500,
     "demo_landed_only": True,
     "shield": True,
@@ -260,10 +261,10 @@ PRESETS["ocp"] = {
 
 # Ours for issue 32: DAgger after `ocp` (needs --init-policy, the `ocp` run's best.pt). Each
 # round the current network flies 500 new `broad` episodes behind its layer (a random action
-# on 10 % of its steps), mpc-fuel-reserve labels every state it decides on, the labels join all
-# earlier ones (aggregated) and 20k pre-training updates follow; 500 more teacher episodes at
-# the start; no interaction phase. `broad` rather than `standard` for the demonstrations, the
-# rounds and the selection (docs/experiments/2026-11-28-dagger-under-broad.md).
+# on 10 % of its steps), mpc-fuel-reserve-state labels every state it decides on, the labels
+# join all earlier ones (aggregated) and 20k pre-training updates follow; 500 more teacher
+# episodes at the start; no interaction phase. `broad` rather than `standard` for the
+# demonstrations, the rounds and the selection (docs/experiments/2026-11-28-dagger-under-broad.md).
 PRESETS["ocp-dagger"] = {
     **PRESETS["ocp"],
     "dispersions": "broad",
