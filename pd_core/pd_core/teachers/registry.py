@@ -3,7 +3,8 @@
 `mpc-fuel` and `mpc-energy` are the receding-horizon optimal-control teacher
 (`pd_core.teachers.mpc`) with the fuel or the energy (Eq. 4) objective, and ZEM/ZEV as its
 fallback near the pad. `mpc-fuel-reserve` is the fuel teacher that keeps the runtime layer's
-vertical reserve (`reserve_controller`, issue 32).
+vertical reserve (`reserve_controller`, issue 32); `mpc-fuel-reserve-state`, the training
+recipe's teacher, is the same teacher handing over to its fallback on the state's clock.
 """
 
 from __future__ import annotations
@@ -62,7 +63,11 @@ def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> M
 
 
 def _reserve_state() -> MPCController:
-    """`mpc-fuel-reserve` handing over to its fallback on the state's time-to-go."""
+    """`mpc-fuel-reserve-state`, the recipe's teacher since 2026-12-02: `mpc-fuel-reserve`
+    whose fallback lands once the state's time to rest at the gate is under 2 s
+    (`MPCParams.handover_from_state`), not the plan's time-to-go, so that a student, which sees
+    the state and not the plan, can learn when the end-game starts
+    (docs/experiments/2026-12-02-state-handover.md)."""
     ctl = reserve_controller(
         ZemZevController(VERNIER_PARAMS), replace(RESERVE_PARAMS, handover_from_state=True)
     )
@@ -81,7 +86,7 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "mpc-fuel": _mpc("fuel"),
     "mpc-energy": _mpc("energy"),
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
-    "mpc-fuel-reserve-state": lambda: _reserve_state(),
+    "mpc-fuel-reserve-state": _reserve_state,
 }
 CONTROLLERS = tuple(FACTORIES)
 
