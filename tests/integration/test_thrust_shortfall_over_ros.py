@@ -16,7 +16,7 @@ from pd_ros_common.convert import final_state
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 
 SCALE = 0.88
-SEED = 1
+SEED = 0  # an episode the nominal-thrust layer loses with the shipped file (6 m/s)
 
 
 def nominal_thrust(p: Runtime) -> Runtime:
