@@ -12,8 +12,8 @@
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
 #      on the machine's speed, load or torch thread count (another CPU may give other bits).
 #      The recipe's policy is stage 2's best.pt. Wall time on two cores: 47.5 min with
-#      mpc-fuel-reserve (machine of 12-01, docs/experiments/2026-12-01-ocp-default.md), about
-#      60 min with mpc-fuel-reserve-state beside other work (2026-12-02-state-handover.md).
+#      mpc-fuel-reserve (machine of 12-01, docs/experiments/2026-12-01-ocp-default.md), 64 min
+#      with mpc-fuel-reserve-state beside other work (2026-12-02-state-handover.md).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
@@ -57,8 +57,8 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    (pd-train --near-pad): Eq. 21's 7 inputs only
   --demonstrator D with --teacher ocp, the ablation arm: mpc-fuel-reserve-state
                    (default), mpc-fuel-reserve, zemzev-vernier, open-loop (the paper's 33
-                   trajectories) or none; the same
-                   recipe and budget (default DIR runs/ablation_D__S)
+                   trajectories) or none; the same recipe and budget (default DIR
+                   runs/ablation_D__S)
   --threads N      torch threads of each stage (default 2: one seed on two cores; give 1 to
                    train two seeds side by side). With --teacher ocp the files are the same
                    either way (shortened runs of both stages, the whole stage 2, and the whole
