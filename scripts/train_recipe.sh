@@ -11,9 +11,8 @@
 #      pre-training updates after each; no interaction.
 #      Both stages are budgeted by updates, not wall time, so a seed's file does not depend
 #      on the machine's speed, load or torch thread count (another CPU may give other bits).
-#      The recipe's policy is stage 2's best.pt. Wall time on two cores: 47.5 min with
-#      mpc-fuel-reserve (machine of 12-01, docs/experiments/2026-12-01-ocp-default.md), 64 min
-#      with mpc-fuel-reserve-state beside other work (2026-12-02-state-handover.md).
+#      The recipe's policy is stage 2's best.pt. Wall time on two cores, alone: 59 min
+#      (seed 3, docs/experiments/2026-12-02-three-seeds-and-teacher-campaign.md).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
