@@ -79,7 +79,8 @@ stage1=""
 dry=0
 threads=2
 teacher=ocp
-demonstrator=mpc-fuel-reserve-state
+recipe_teacher=mpc-fuel-reserve-state  # what the ocp presets name (pd_core.dqn.config)
+demonstrator=$recipe_teacher
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
     case "$1" in
@@ -103,8 +104,8 @@ case "$demonstrator" in
     mpc-fuel-reserve-state | mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
     *) echo "train_recipe.sh: --demonstrator must be mpc-fuel-reserve-state, mpc-fuel-reserve, zemzev-vernier, open-loop or none, got '$demonstrator'" >&2; exit 2 ;;
 esac
-[[ "$demonstrator" == mpc-fuel-reserve-state || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
-if [[ "$teacher" == ocp && "$demonstrator" != mpc-fuel-reserve-state ]]; then
+[[ "$demonstrator" == "$recipe_teacher" || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
+if [[ "$teacher" == ocp && "$demonstrator" != "$recipe_teacher" ]]; then
     out="${out:-runs/ablation_${demonstrator}__$seed}"
 elif [[ "$teacher" == ocp ]]; then
     out="${out:-runs/ocp__$seed}"
@@ -153,7 +154,7 @@ if [[ "$teacher" == ocp && ( "$demonstrator" == open-loop || "$demonstrator" == 
 fi
 if [[ "$teacher" == ocp ]]; then
     arm=()
-    [[ "$demonstrator" != mpc-fuel-reserve-state ]] && arm=(--controller "$demonstrator")
+    [[ "$demonstrator" != "$recipe_teacher" ]] && arm=(--controller "$demonstrator")
     if [[ -z "$stage1" ]]; then
         stage stage1 --preset ocp "${arm[@]}"
         stage1="$out/stage1/best.pt"

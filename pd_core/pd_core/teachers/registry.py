@@ -37,9 +37,16 @@ RESERVE_PARAMS = MPCParams(
     terminal_time_s=2.0,
     lateral_settle_s=2.0,
 )
+# `mpc-fuel-reserve-state`, the recipe's teacher since 2026-12-02: the fallback lands once the
+# state's time to rest at the gate is under 2 s (`MPCParams.handover_from_state`), not the
+# plan's time-to-go, so that a student, which sees the state and not the plan, can learn when
+# the end-game starts (docs/experiments/2026-12-02-state-handover.md).
+RESERVE_STATE_PARAMS = replace(RESERVE_PARAMS, handover_from_state=True)
 
 
-def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> MPCController:
+def reserve_controller(
+    fallback: Actor, params: MPCParams = RESERVE_PARAMS, name: str = "mpc-fuel-reserve"
+) -> MPCController:
     """`mpc-fuel-reserve` (issue 32): the fuel teacher flying its own plans within the runtime
     layer's vertical reserve. Each choice below was measured on nominal episodes behind the
     layer (bench/mpc_diagnose.py; figures in docs/experiments/2026-11-26-fuel-optimal-teacher.md
@@ -58,20 +65,7 @@ def reserve_controller(fallback: Actor, params: MPCParams = RESERVE_PARAMS) -> M
       braked it last.
     """
     ctl = MPCController(params, fallback)
-    ctl.name = "mpc-fuel-reserve"
-    return ctl
-
-
-def _reserve_state() -> MPCController:
-    """`mpc-fuel-reserve-state`, the recipe's teacher since 2026-12-02: `mpc-fuel-reserve`
-    whose fallback lands once the state's time to rest at the gate is under 2 s
-    (`MPCParams.handover_from_state`), not the plan's time-to-go, so that a student, which sees
-    the state and not the plan, can learn when the end-game starts
-    (docs/experiments/2026-12-02-state-handover.md)."""
-    ctl = reserve_controller(
-        ZemZevController(VERNIER_PARAMS), replace(RESERVE_PARAMS, handover_from_state=True)
-    )
-    ctl.name = "mpc-fuel-reserve-state"
+    ctl.name = name
     return ctl
 
 
@@ -86,7 +80,9 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "mpc-fuel": _mpc("fuel"),
     "mpc-energy": _mpc("energy"),
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
-    "mpc-fuel-reserve-state": _reserve_state,
+    "mpc-fuel-reserve-state": lambda: reserve_controller(
+        ZemZevController(VERNIER_PARAMS), RESERVE_STATE_PARAMS, "mpc-fuel-reserve-state"
+    ),
 }
 CONTROLLERS = tuple(FACTORIES)
 
