@@ -23,6 +23,7 @@ def test_campaign_table_json_and_png(tmp_path, capsys):
         assert a == b  # the same controller on the same seeds: the same numbers
         assert a["episodes"] == 40 and 0.0 <= a["success_rate"] <= 1.0
         assert a["miss_median_m"] <= a["miss_p99_m"]
+        assert a["layer_changed_rate"] is None  # a bare controller has no runtime layer
     assert t["results"]["nominal"]["zz"]["success_rate"] == 1.0
     assert t["results"]["all"]["zz"]["success_rate"] < 1.0  # the combined case bites
     assert (out / "campaign.png").stat().st_size > 5000
@@ -70,5 +71,7 @@ def test_long_scenario_and_agent_names_keep_their_columns(tmp_path, capsys):
     assert pd_eval.main(argv + ["--out", str(tmp_path / "o"), "--no-progress"]) == 0
     rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("delay2-")]
     assert len(rows) == 2
-    for r in rows:  # name, agent and six figures, each separated by spaces
-        assert len(r.split()) == 8, r
+    for r in rows:  # name, agent and seven figures, each separated by spaces
+        assert len(r.split()) == 9, r
+    # the layer's share: '-' for the bare controller, a percentage behind the layer
+    assert rows[0].split()[-1] == "-" and 0.0 <= float(rows[1].split()[-1]) <= 100.0

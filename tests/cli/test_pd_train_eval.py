@@ -129,12 +129,23 @@ def test_eval_controller_text_report(capsys):
 def test_eval_of_a_policy_file_says_how_often_its_runtime_layer_changed_the_network(capsys):
     """The report counts the actions the layer changed, per rule, over every decision flown."""
     shipped = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt"
-    assert pd_eval.main([str(shipped), "--episodes", "10", "--seed", "3"]) == 0
+    argv = [
+        str(shipped),
+        "--episodes",
+        "10",
+        "--seed",
+        "3",
+        "--compare",
+        "zz=shield:controller:zemzev",
+    ]
+    assert pd_eval.main(argv) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("runtime layer: changed "))
     changed, steps = (int(v) for v in re.findall(r"changed (\d+) of (\d+) actions", line)[0])
     rules = [int(v) for v in re.findall(r"(?:brake|guard|handover) (\d+)", line)]
     assert 10 * 150 < steps < 10 * 400 and sum(rules) == changed and 0 < changed < steps
+    assert line.endswith(f", {100 * changed / steps:.1f} %")
+    assert "runtime layer of zz: changed " in out  # a compared agent behind the layer too
 
 
 def test_eval_refuses_mismatched_model(tmp_path, capsys):

@@ -63,7 +63,7 @@ def local_ray():
 
 
 def test_sharded_campaign_equals_unsharded_exactly(local_ray):
-    agents = {"dqn": str(MODEL), "zemzev": "controller:zemzev"}
+    agents = {"dqn": str(MODEL), "zemzev": "controller:zemzev", "ocp": str(OCP_MODEL)}
     scenarios = [SCENARIOS["nominal"], SCENARIOS["all"]]
     kw = {"episodes": 96, "seed": 40, "chunk": 32}
     sharded = run_campaign_ray(agents, scenarios, shards=3, progress=False, **kw)
@@ -72,6 +72,10 @@ def test_sharded_campaign_equals_unsharded_exactly(local_ray):
         for a in agents:
             assert len(sharded[d.name][a].landed) == 96
             _assert_same(sharded[d.name][a], here[d.name][a])
+            # what the runtime layer decided comes back from the shards too, step for step
+            assert sharded[d.name][a].layer == here[d.name][a].layer
+        assert sum(here[d.name]["ocp"].layer.values()) == here[d.name]["ocp"].steps.sum()
+        assert here[d.name]["ocp"].layer["brake"] > 0 and here[d.name]["zemzev"].layer == {}
     # the nominal cell is the plain evaluation, episode i on seed 40 + i
     _assert_same(here["nominal"]["zemzev"], rollout(ZemZevController(), 96, 40))
 

@@ -35,6 +35,7 @@ from pd_core.experiments.campaign import (
 )
 from pd_core.experiments.evaluate import (
     Rollouts,
+    describe_layer,
     format_report,
     fuel_optimal_ratios,
     rollout,
@@ -42,7 +43,6 @@ from pd_core.experiments.evaluate import (
     to_json,
 )
 from pd_core.experiments.table7 import table7_blocks
-from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import PolicyLoadError
 from pd_core.teachers.registry import CONTROLLERS
 
@@ -145,7 +145,6 @@ def main(argv: list[str] | None = None) -> int:
         if args.dispersions:
             return campaign_main(args, spec, args.name or name)
         ro = _rollouts(args, spec, actor)
-        layer = layer_share(actor) if isinstance(actor, Runtime) and not args.ray else None
         others = _compared(args)
     except (PolicyLoadError, ValueError, RuntimeError) as exc:
         print(f"pd-eval: {exc}", file=sys.stderr)
@@ -161,21 +160,14 @@ def main(argv: list[str] | None = None) -> int:
         print(to_json(summary, name=name, seed=args.seed, figures=figures, compare=compared))
     else:
         print(format_report(summary, name, args.seed))
-        if layer:
-            print(f"runtime layer: {layer}")
         if compared:
             print("\n" + table7_blocks({name: summary, **compared}))
+            for n, c in compared.items():
+                if "layer_steps" in c:
+                    print(f"runtime layer of {n}: {describe_layer(c)}")
         for k, v in figures.items():
             print(f"figure {k}: {v}")
     return 0
-
-
-def layer_share(runtime: Runtime) -> str:
-    """Who decided the steps a runtime flew: the share the layer changed, per rule."""
-    steps = sum(runtime.counts.values())
-    rules = ", ".join(f"{k} {v}" for k, v in runtime.counts.items() if k != "network")
-    share = 100.0 * runtime.changed / max(steps, 1)
-    return f"changed {runtime.changed} of {steps} actions ({share:.1f} %: {rules})"
 
 
 def _compared(args: argparse.Namespace) -> dict[str, tuple[str, Rollouts]]:

@@ -32,6 +32,7 @@ from pd_core.experiments.evaluate import (
     Actor,
     Rollouts,
     concat_rollouts,
+    layer_changed_rate,
     rollout,
 )
 from pd_core.experiments.reachability import ScenarioReach, campaign_reachability, failed_episodes
@@ -50,6 +51,7 @@ METRICS = (
     ("miss_p99_m", "miss p99 m", 1.0, ".2f"),
     ("k_velocity_worst_mps", "worst vk m/s", 1.0, ".2f"),
     ("fuel_median_kg", "fuel p50 kg", 1.0, ".1f"),
+    ("layer_changed_rate", "layer %", 100.0, ".1f"),
 )
 REACH_HEAD = ("out of reach", "success % of reachable")
 # Failed episodes listed per cell: in campaign.json (enough for complete pairs in
@@ -163,6 +165,7 @@ def metrics(ro: Rollouts) -> dict[str, float]:
         "k_velocity_worst_mps": float(np.min(f[:, 5])),
         "fuel_median_kg": float(np.median(ro.fuel_kg)),
         "out_of_time_rate": float(np.mean(~ro.terminated)),
+        "layer_changed_rate": layer_changed_rate(ro),
     }
 
 
@@ -322,7 +325,7 @@ def format_table(t: dict[str, Any]) -> str:
     for d in t["scenarios"]:
         for a in t["agents"]:
             cell = t["results"][d["name"]][a]
-            vals = "".join(f"{cell[k] * s:>{width}{fmt}}" for k, _, s, fmt in METRICS)
+            vals = "".join(_cell(cell.get(k), s, f">{width}{fmt}") for k, _, s, fmt in METRICS)
             if reach is not None:
                 rate = cell["success_rate_reachable"]
                 vals += f"{reach[d['name']]['out_of_reach']:>{width}d}"
@@ -347,6 +350,11 @@ def format_table(t: dict[str, Any]) -> str:
                 f"{_some(r['undecided_episodes'])}"
             )
     return "\n".join(lines)
+
+
+def _cell(value: float | None, scale: float, fmt: str) -> str:
+    """One number of the table, '-' where the cell has none (a layer share without a layer)."""
+    return format("-", fmt[: fmt.index(".")]) if value is None else format(value * scale, fmt)
 
 
 def _failure_lines(t: dict[str, Any], n: int = LISTED_FAILURES_TEXT) -> list[str]:

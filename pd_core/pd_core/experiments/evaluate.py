@@ -18,6 +18,7 @@ import numpy as np
 
 from pd_core.config import MAX_EPISODE_TIME_S, PAPER_TABLE7, REWARD, RewardConfig
 from pd_core.dispersions import Dispersions
+from pd_core.runtime.decision import changed_count, describe_counts
 from pd_core.vector_env import PoweredDescentVectorEnv, make_vector_env
 
 QUANTITIES = ("norm_ij_position_m", "norm_ij_velocity_mps", "k_velocity_mps", "fuel_kg")
@@ -48,6 +49,9 @@ class Rollouts:
     returns: np.ndarray  # (N,) undiscounted training reward
     trajectories: list[np.ndarray] = field(default_factory=list)  # states (T+1, 7), if kept
     actions: list[np.ndarray] = field(default_factory=list)  # actions (T,), if kept
+    layer: dict[str, int] = field(default_factory=dict)
+    """steps decided by each source of the runtime layer over these episodes
+    (`pd_core.runtime.decision.SOURCES`); empty for an actor flown without one"""
 
     @property
     def fuel_kg(self) -> np.ndarray:
@@ -59,7 +63,11 @@ def concat_rollouts(parts: Sequence[Rollouts]) -> Rollouts:
     cat = [np.concatenate([getattr(p, f) for p in parts]) for f in _ARRAY_FIELDS]
     paths = [t for p in parts for t in p.trajectories]
     acts = [a for p in parts for a in p.actions]
-    return Rollouts(*cat, paths, acts)
+    layer: dict[str, int] = {}
+    for p in parts:
+        for k, v in p.layer.items():
+            layer[k] = layer.get(k, 0) + v
+    return Rollouts(*cat, paths, acts, layer)
 
 
 _ARRAY_FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
@@ -140,6 +148,7 @@ def fly_episodes(
     )  # an actor with memory per lander (pd_core.runtime.latency)
     if rowwise:
         actor.begin_episodes(n)
+    counted = dict(getattr(actor, "counts", {}))
     while active.any():
         if rowwise:
             actions[active] = actor.act_rows(observed[active], np.flatnonzero(active))
@@ -162,6 +171,7 @@ def fly_episodes(
         ret,
         [np.array(p) for p in paths],
         [np.array(a, dtype=np.int64) for a in acts],
+        {k: v - counted[k] for k, v in getattr(actor, "counts", {}).items()},
     )
 
 
@@ -173,6 +183,11 @@ def final_quantities(ro: Rollouts) -> dict[str, np.ndarray]:
         "k_velocity_mps": f[:, 5],
         "fuel_kg": ro.fuel_kg,
     }
+
+
+def layer_changed_rate(ro: Rollouts) -> float | None:
+    """Share of the steps flown on which the runtime layer changed the action (None: no layer)."""
+    return changed_count(ro.layer) / max(sum(ro.layer.values()), 1) if ro.layer else None
 
 
 def summarise(ro: Rollouts, fuel_optimal: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -194,6 +209,9 @@ def summarise(ro: Rollouts, fuel_optimal: dict[str, Any] | None = None) -> dict[
         "mean_return": float(np.mean(ro.returns)),
         "median_steps": float(np.median(ro.steps)),
     }
+    if ro.layer:
+        out["layer_changed_rate"] = layer_changed_rate(ro)
+        out["layer_steps"] = dict(ro.layer)
     if fuel_optimal is not None:
         out["fuel_optimal"] = fuel_optimal
     return out
@@ -263,6 +281,8 @@ def format_report(summary: dict[str, Any], name: str, seed: int) -> str:
         f"{100 * summary['out_of_time_rate']:.1f} %",
         f"mean return (training reward):                     {summary['mean_return']:.2f}",
     ]
+    if "layer_steps" in summary:
+        lines.append(f"runtime layer: {describe_layer(summary)}")
     fo = summary.get("fuel_optimal")
     if fo:
         if fo.get("available"):
@@ -274,6 +294,11 @@ def format_report(summary: dict[str, Any], name: str, seed: int) -> str:
         else:
             lines.append(f"fuel-optimal comparison unavailable: {fo['message']}")
     return "\n".join(lines)
+
+
+def describe_layer(summary: dict[str, Any]) -> str:
+    """What the runtime layer changed in a `summarise` of an agent flown behind one."""
+    return f"{describe_counts(summary['layer_steps'])}, {100 * summary['layer_changed_rate']:.1f} %"
 
 
 def _triple(t: tuple[float, float, float]) -> str:
@@ -296,10 +321,12 @@ __all__ = [
     "CHUNK_EPISODES",
     "Rollouts",
     "concat_rollouts",
+    "describe_layer",
     "fly_episodes",
     "final_quantities",
     "format_report",
     "fuel_optimal_ratios",
+    "layer_changed_rate",
     "rollout",
     "summarise",
 ]

@@ -8,6 +8,7 @@ not count.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +16,17 @@ import numpy as np
 NETWORK, BRAKE, GUARD, HANDOVER = 0, 1, 2, 3
 SOURCES = ("network", "brake", "guard", "handover")
 """name of each source, by number"""
+
+
+def changed_count(counts: Mapping[str, int]) -> int:
+    """Steps some rule decided (every source but the network) among `counts` (source -> steps)."""
+    return sum(v for k, v in counts.items() if k != SOURCES[NETWORK])
+
+
+def describe_counts(counts: Mapping[str, int]) -> str:
+    """'changed C of N actions (brake b, guard g, handover h)' for steps counted by source."""
+    rules = ", ".join(f"{k} {v}" for k, v in counts.items() if k != SOURCES[NETWORK])
+    return f"changed {changed_count(counts)} of {sum(counts.values())} actions ({rules})"
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
-from pd_core.runtime.decision import SOURCES, Decision, Decisions
+from pd_core.runtime.decision import SOURCES, Decision, Decisions, changed_count, describe_counts
 from pd_core.runtime.kernels_step import after_actor
 from pd_core.runtime.latency import NO_PIPELINE, LatencyCompensator
 from pd_core.runtime.network import NumpyQNetwork, observed_states
@@ -179,13 +179,11 @@ class Runtime:
     @property
     def changed(self) -> int:
         """Steps on which the layer changed the actor's action (since construction)."""
-        return sum(v for k, v in self.counts.items() if k != SOURCES[0])
+        return changed_count(self.counts)
 
     def describe(self) -> str:
         """One phrase on what the layer decided for row 0 (the policy node's statistics)."""
-        steps = sum(self.counts.values())
-        rules = ", ".join(f"{k} {v}" for k, v in self.counts.items() if k != SOURCES[0])
-        out = f"layer changed {self.changed} of {steps} actions ({rules})"
+        out = "layer " + describe_counts(self.counts)
         if self.latency is not None:
             out += "; " + self.latency.describe(0)
         return out
