@@ -12,7 +12,7 @@ from pd_core.env import PoweredDescentEnv
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy
-from pd_core.teachers.registry import CONTROLLERS, make_controller
+from pd_core.teachers.registry import make_controller
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_policy_node.node import default_model_path
@@ -122,7 +122,6 @@ def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
     np.testing.assert_array_equal(final_state(result), expected[-1])
 
 
-@pytest.mark.skipif("mpc-fuel" not in CONTROLLERS, reason="pd_core.teachers.zemzev has no mpc-fuel")
 def test_mpc_fuel_flies_over_ros(sim, make_node, spin_until):
     """The MPC teacher answers every state with a valid command (it re-plans every step, so
     only its first steps are flown; its plans depend on solver time limits, so the states are
