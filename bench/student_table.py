@@ -26,7 +26,7 @@ import numpy as np
 
 from pd_core.dispersions import load_scenarios
 from pd_core.experiments.campaign import load_actor, run_campaign
-from pd_core.experiments.evaluate import fuel_optimal_ratios, rollout
+from pd_core.experiments.evaluate import fuel_optimal_ratios, layer_changed_rate, rollout
 
 COLUMNS = (
     ("nominal_success_pct", "nominal %", "{:.2f}"),
@@ -43,7 +43,6 @@ def measure(path: str, a: argparse.Namespace) -> dict[str, Any]:
     """The figures of one policy file."""
     actor, _name = load_actor(path)
     ro = rollout(actor, a.episodes, a.seed)
-    steps = sum(actor.counts.values())
     fo = fuel_optimal_ratios(ro, a.fuel_optimal) if a.fuel_optimal > 0 else {}
     bare = rollout(load_actor(f"bare:{path}")[0], a.episodes, a.seed)
     flown = run_campaign({"s": path}, load_scenarios(a.campaign), a.campaign_episodes, a.seed)
@@ -55,7 +54,7 @@ def measure(path: str, a: argparse.Namespace) -> dict[str, Any]:
         "nominal_landed": int(np.sum(ro.landed)),
         "fuel_ratio": fo.get("median_ratio"),
         "miss_p50_m": float(np.median(np.linalg.norm(ro.final_states[:, 0:2], axis=1))),
-        "layer_changed_pct": 100.0 * actor.changed / max(steps, 1),
+        "layer_changed_pct": 100.0 * (layer_changed_rate(ro) or 0.0),
         "bare_nominal_pct": float(np.mean(bare.landed)) * 100,
         "campaign_mean_pct": float(np.mean(list(per.values()))),
         "campaign_min_pct": per[low],

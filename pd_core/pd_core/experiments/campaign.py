@@ -325,7 +325,7 @@ def format_table(t: dict[str, Any]) -> str:
     for d in t["scenarios"]:
         for a in t["agents"]:
             cell = t["results"][d["name"]][a]
-            vals = "".join(_cell(cell.get(k), s, f">{width}{fmt}") for k, _, s, fmt in METRICS)
+            vals = "".join(_cell(cell.get(k), s, width, fmt) for k, _, s, fmt in METRICS)
             if reach is not None:
                 rate = cell["success_rate_reachable"]
                 vals += f"{reach[d['name']]['out_of_reach']:>{width}d}"
@@ -352,9 +352,9 @@ def format_table(t: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _cell(value: float | None, scale: float, fmt: str) -> str:
+def _cell(value: float | None, scale: float, width: int, fmt: str) -> str:
     """One number of the table, '-' where the cell has none (a layer share without a layer)."""
-    return format("-", fmt[: fmt.index(".")]) if value is None else format(value * scale, fmt)
+    return f"{'-':>{width}}" if value is None else f"{value * scale:>{width}{fmt}}"
 
 
 def _failure_lines(t: dict[str, Any], n: int = LISTED_FAILURES_TEXT) -> list[str]:
