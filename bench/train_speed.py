@@ -9,6 +9,9 @@
    CPU (numpy replay, as `pd-train --device cpu`; and the device code path, eager), and where torch
    sees a GPU, cuda eager and cuda graph (`pd-train --device cuda`: replay memories on the GPU, the
    whole update one CUDA graph; the plain loop captured the same way).
+   1c. The paper's update for K in {1, 8, 32, 128} updates per block: the plain loop, the
+   graph path of 1 and the device loop (`pd-train --loop device`), one and several agents
+   together, on every device present; then the whole device loop with its envs.
    1b. The recipe's update (`ocp-dagger`) beside the same update as the plain per-tensor loop
    it was up to 2f59083 (module calls, per-tensor Adam and average), blocks interleaved,
    with the ratio and a check that both give the same weights to the bit.
@@ -28,6 +31,7 @@ import copy
 import tempfile
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -36,6 +40,7 @@ import torch.nn.functional as F
 from pd_core.dqn.agent import DQNAgent, concat_samples
 from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.device import WARMUP_STEPS, DeviceReplay, DeviceUpdate
+from pd_core.dqn.device_loop import DeviceLoop
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory
 from pd_core.dqn.train import Trainer
@@ -220,6 +225,70 @@ def device_report(seconds: float, numpy_ups: float, plain_cpu_ups: float) -> Non
     print(f"   fastest: {best[0]}, {best[1]}: {best[2] / numpy_ups:.1f}x the CPU's numpy path")
 
 
+def _device_loop(device: torch.device, agents: int, k: int, **kw) -> DeviceLoop:
+    """A device loop of `agents` paper-agent1 seeds, K = `k` updates per block, on `device`."""
+    cfg = preset(
+        "paper-agent1", num_envs=16, updates_per_step=float(k), learning_starts=1000,
+        eval_every_s=0.0, progress=False, device=device.type, **kw,
+    )  # fmt: skip
+    cfgs = [replace(cfg, seed=s) for s in range(1, agents + 1)]
+    d = Path(tempfile.mkdtemp(prefix="pd_train_speed_"))
+    return DeviceLoop(cfgs, [d / str(c.seed) for c in cfgs], quiet=True, capacity=100_000)
+
+
+def block_updates_per_s(device: torch.device, agents: int, k: int, seconds: float) -> float:
+    """Updates/s of each agent in the device loop's update block alone (K updates, one graph
+    on cuda), memories full of random rows."""
+    loop = _device_loop(device, agents, k)
+    loop.store.copy_(torch.randn_like(loop.store))
+    loop.store[:, 7].copy_(torch.randint(0, 147, (loop.store.shape[0],), device=device))
+    for agent in loop.agents:
+        agent.replay_size = loop.capacity
+    owed = [k] * agents
+    return k * _per_s_on(lambda: loop.update_block(owed), seconds, device, warmup=4)
+
+
+def loop_updates_per_s(device: torch.device, agents: int, seconds: float) -> float:
+    """Updates/s of each agent in the whole device loop (act, env step, inserts, a block of
+    16 updates per step of 16 envs), after its first 1000 transitions."""
+    loop = _device_loop(device, agents, 16)
+    pending = [0] * agents
+    while loop.agents[0].updates < 2000:
+        pending = loop.iterate(pending)
+    _sync(device)
+    u0, t0 = loop.agents[0].updates, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        pending = loop.iterate(pending)
+    _sync(device)
+    return (loop.agents[0].updates - u0) / (time.perf_counter() - t0)
+
+
+def device_loop_report(seconds: float, agents: tuple[int, ...] = (1, 4), cpu: bool = True) -> None:
+    """Part 1c: the paper's update in the plain torch loop, today's graph path (`DeviceUpdate`)
+    and the device loop, for K in {1, 8, 32, 128} updates per block, on every device here
+    (without `cpu`, on the GPU alone)."""
+    devices = [torch.device("cpu")] if cpu else []
+    if torch.cuda.is_available():
+        devices.append(torch.device("cuda"))
+    print("1c. The paper's update: plain torch, the graph path and the device loop (updates/s")
+    print("    of one agent; with A agents together, of each; total = A x that)")
+    head = f"   {'device':28s} {'K':>4s} {'plain':>8s} {'graph path':>10s}"
+    head += "".join(f" {f'loop A={a}':>10s}" for a in agents) + f" {'loop/graph':>10s}"
+    print(head)
+    for dev in devices:
+        name = dev.type if dev.type == "cpu" else f"cuda ({torch.cuda.get_device_name(dev)})"
+        graph = dev.type == "cuda"
+        plain = plain_updates_per_s(dev, graph, seconds)
+        path = device_path_updates_per_s(dev, graph, seconds)
+        for k in (1, 8, 32, 128):
+            ups = [block_updates_per_s(dev, a, k, seconds) for a in agents]
+            row = f"   {name:28s} {k:4d} {plain:8.0f} {path:10.0f}"
+            print(row + "".join(f" {u:10.0f}" for u in ups) + f" {ups[0] / path:10.2f}")
+        whole = [loop_updates_per_s(dev, a, seconds) for a in agents]
+        row = f"   {name:28s} {'env':>4s} {'':8s} {'':10s}"
+        print(row + "".join(f" {u:10.0f}" for u in whole) + "   (whole loop, 16 envs, K 16)")
+
+
 def ratio_check(
     updates: int, seeds: tuple[int, ...] = (1, 2), episodes: int = 200, lr: float = 0.0
 ) -> None:
@@ -392,11 +461,20 @@ def main() -> None:
     )
     ap.add_argument("--ratio-lr", type=float, default=0.0, help="part 4's lr (default: Table 2)")
     ap.add_argument("--only-updates", action="store_true", help="part 1 only (and part 4)")
+    ap.add_argument("--device-loop", action="store_true", help="part 1c only")
+    ap.add_argument("--gpu-only", action="store_true", help="part 1c on the GPU alone")
+    ap.add_argument(
+        "--agents", type=int, nargs="+", default=[1, 4], help="part 1c's agents together"
+    )
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     print(f"torch threads: {a.threads}")
+    if a.device_loop:
+        device_loop_report(a.seconds, tuple(a.agents), cpu=not a.gpu_only)
+        return
     upd_us = paper_update_report(a.seconds)
     recipe_update_report(a.seconds)
+    device_loop_report(a.seconds, tuple(a.agents))
     if a.only_updates:
         if a.ratio_check:
             ratio_check(a.ratio_check, lr=a.ratio_lr)

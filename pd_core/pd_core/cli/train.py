@@ -7,6 +7,8 @@ Examples:
     pd-train --resume runs/best__1__20260101-120000 --max-minutes 80
     pd-train --resume runs/best__1__20260101-120000 --device cpu  # a GPU run, on a CPU
     pd-train --preset ocp --address auto  # the teacher's episodes and labels on a Ray cluster
+    pd-train --preset paper-agent1 --num-envs 16 --updates-per-step 16 --device cuda \
+        --agents paper-agent2:1  # Agents 1 and 2 together in the device loop, one graph a step
 """
 
 from __future__ import annotations
@@ -55,9 +57,13 @@ def join_ray(address: str) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
+    from pd_core.dqn.device_loop import uses_device_loop
     from pd_core.dqn.train import Trainer
 
     if args.resume:
+        if args.loop == "device" or args.agents:
+            print("pd-train: the device loop does not resume (--loop reference)", file=sys.stderr)
+            return 2
         overrides = {
             f.name: getattr(args, f.name)
             for f in fields(TrainConfig)
@@ -84,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         if (reason := join_ray(cfg.address)) is not None:
             print(f"pd-train: {reason}", file=sys.stderr)
             return 2
+        if uses_device_loop(cfg):
+            return run_device_loop(cfg, args)
         try:
             trainer = Trainer(cfg)
         except (FileNotFoundError, ValueError) as exc:
@@ -96,6 +104,33 @@ def main(argv: list[str] | None = None) -> int:
     else:
         for k, v in summary.items():
             print(f"{k}: {v}")
+    return 0
+
+
+def run_device_loop(cfg: TrainConfig, args: argparse.Namespace) -> int:
+    """Train `cfg` and its `--agents` together in `pd_core.dqn.device_loop`; print summaries."""
+    from pd_core.dqn.device_loop import DeviceLoop, agent_configs
+
+    overrides = {
+        f.name: getattr(args, f.name)
+        for f in fields(TrainConfig)
+        if f.name not in ("preset", "seed", "agents") and getattr(args, f.name, None) is not None
+    }
+    try:
+        cfgs, run_dirs = agent_configs(cfg, overrides)
+        loop = DeviceLoop(cfgs, run_dirs)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"pd-train: {exc}", file=sys.stderr)
+        return 2
+    for c, d in zip(cfgs, run_dirs, strict=True):
+        print(f"pd-train: device loop, {c.preset} seed {c.seed}: run folder {d}", file=sys.stderr)
+    summaries = loop.run()
+    if args.json:
+        print(json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
+    else:
+        for summary in summaries:
+            for k, v in summary.items():
+                print(f"{k}: {v}")
     return 0
 
 

@@ -176,6 +176,16 @@ class TrainConfig:
     cpu keeps numpy replay memories and resumes bit for bit"""
     progress: bool = True
     """show a tqdm progress bar"""
+    loop: str = "auto"
+    """the training loop: reference (pd_core.dqn.train, every option, resumable), device
+    (pd_core.dqn.device_loop: Table 2's algorithm with the replay memories, the minibatch draws
+    and blocks of updates_per_step updates on the device, one CUDA graph each on cuda; also runs
+    on the CPU), or auto (device on cuda where the config is Table 2's algorithm, else
+    reference)"""
+    agents: str = ""
+    """more agents trained together with this one by the device loop, as preset:seed pairs
+    (e.g. paper-agent1:2,paper-agent2:1; the flags given apply to them too); each has its own run
+    folder under run_dir, named <preset>__<seed>"""
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -292,6 +302,7 @@ PRESETS["ocp-dagger"] = {
 
 SCENARIO_SAMPLING = ("uniform", "failures")
 DEVICES = ("auto", "cpu", "cuda")
+LOOPS = ("auto", "reference", "device")
 _POSITIVE = ("episodes", "num_envs", "batch_agent", "gamma", "lr", "n_step", "buffer_size")
 _NON_NEGATIVE = (
     "max_minutes",
@@ -354,6 +365,12 @@ def check_config(cfg: TrainConfig) -> None:
         raise ValueError("dagger_rounds needs label_episodes, batch_demo and pretrain_updates > 0")
     if cfg.device not in DEVICES:
         raise ValueError(f"device must be one of {DEVICES}, got {cfg.device!r}")
+    if cfg.loop not in LOOPS:
+        raise ValueError(f"loop must be one of {LOOPS}, got {cfg.loop!r}")
+    for item in filter(None, (x.strip() for x in cfg.agents.split(","))):
+        name, _, seed = item.partition(":")
+        if name not in PRESETS or not seed.strip().lstrip("-").isdigit():
+            raise ValueError(f"agents: expected preset:seed pairs, got {item!r}")
     if not cfg.hidden or min(cfg.hidden) < 1:
         raise ValueError(f"hidden must be positive layer widths, got {cfg.hidden!r}")
 
@@ -410,6 +427,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             parser.add_argument(flag, type=_parse_bool, nargs="?", const=True, help=help_)
         elif f.name == "device":
             parser.add_argument(flag, choices=DEVICES, help=help_)
+        elif f.name == "loop":
+            parser.add_argument(flag, choices=LOOPS, help=help_)
         elif f.name == "hidden":
             parser.add_argument(flag, type=_parse_tuple, help=help_ + "; e.g. 300,200,300")
         else:
@@ -428,6 +447,7 @@ def from_args(ns: argparse.Namespace) -> TrainConfig:
 
 __all__ = [
     "DEVICES",
+    "LOOPS",
     "PRESETS",
     "TrainConfig",
     "add_arguments",

@@ -68,6 +68,35 @@ def policy_metadata(cfg: TrainConfig, extra: dict[str, Any] | None = None) -> di
     }
 
 
+def runtime_config_for(cfg: TrainConfig) -> RuntimeConfig:
+    """What a network trained with `cfg` flies behind: the default runtime layer, or none."""
+    return RuntimeConfig() if cfg.shield else RuntimeConfig.off()
+
+
+def greedy_evaluation(
+    net: QNetwork, cfg: TrainConfig, episodes: int | None = None, seed: int | None = None
+) -> dict[str, float]:
+    """The periodic greedy evaluation of a training run: `net` (on the CPU) behind its
+    runtime config on `cfg.eval_episodes` episodes of seed `cfg.eval_seed` (or those given),
+    under `cfg.dispersions`; the figures of evals.csv."""
+    ro = rollout(
+        Runtime(TorchGreedy(net), runtime_config_for(cfg)),
+        episodes or cfg.eval_episodes,
+        cfg.eval_seed if seed is None else seed,
+        dispersions=cfg.dispersions,
+    )
+    s = summarise(ro)
+    t = s["table7"]
+    return {
+        "success_rate": s["success_rate"],
+        "soft_landing_rate": s["soft_landing_rate"],
+        "fuel_median": t["fuel_kg"]["median"],
+        "pos_median": t["norm_ij_position_m"]["median"],
+        "kvel_min": t["k_velocity_mps"]["min"],
+        "mean_return": s["mean_return"],
+    }
+
+
 @dataclasses.dataclass
 class Counters:
     env_steps: int = 0
@@ -339,22 +368,7 @@ class Trainer(TrainingLoop):
 
     def evaluate(self, episodes: int | None = None, seed: int | None = None) -> dict[str, float]:
         """Greedy evaluation on seeded episodes (the periodic one of `run`)."""
-        ro = rollout(
-            Runtime(TorchGreedy(self.cpu_network()), self.runtime_config()),
-            episodes or self.cfg.eval_episodes,
-            self.cfg.eval_seed if seed is None else seed,
-            dispersions=self.cfg.dispersions,
-        )
-        s = summarise(ro)
-        t = s["table7"]
-        return {
-            "success_rate": s["success_rate"],
-            "soft_landing_rate": s["soft_landing_rate"],
-            "fuel_median": t["fuel_kg"]["median"],
-            "pos_median": t["norm_ij_position_m"]["median"],
-            "kvel_min": t["k_velocity_mps"]["min"],
-            "mean_return": s["mean_return"],
-        }
+        return greedy_evaluation(self.cpu_network(), self.cfg, episodes, seed)
 
     def save_policies(self, name: str, extra: dict[str, Any] | None = None) -> Path:
         meta = policy_metadata(
@@ -373,7 +387,7 @@ class Trainer(TrainingLoop):
 
     def runtime_config(self) -> RuntimeConfig:
         """What the trained network flies behind: the default runtime layer, or none."""
-        return RuntimeConfig() if self.cfg.shield else RuntimeConfig.off()
+        return runtime_config_for(self.cfg)
 
 
 def train(
