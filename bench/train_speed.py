@@ -248,6 +248,28 @@ def block_updates_per_s(device: torch.device, agents: int, k: int, seconds: floa
     return k * _per_s_on(lambda: loop.update_block(owed), seconds, device, warmup=4)
 
 
+def block_profile(device: torch.device, agents: int, k: int = 16) -> str:
+    """Kernels per update and GPU time per update of the device loop's block (torch.profiler
+    over 10 blocks after warm-up): where the time of an update goes."""
+    from torch.profiler import ProfilerActivity, profile  # the profiler: only when asked
+
+    loop = _device_loop(device, agents, k)
+    for agent in loop.agents:
+        agent.replay_size = loop.capacity
+    owed = [k] * agents
+    for _ in range(4):
+        loop.update_block(owed)
+    _sync(device)
+    with profile(activities=[ProfilerActivity.CUDA]) as prof:
+        for _ in range(10):
+            loop.update_block(owed)
+        _sync(device)
+    events = [e for e in prof.events() if e.device_type.name == "CUDA"]
+    gpu_us = sum(e.device_time for e in events)
+    n = 10 * k
+    return f"{len(events) / n:.1f} kernels and {gpu_us / n:.1f} us of GPU time per update"
+
+
 def loop_updates_per_s(device: torch.device, agents: int, seconds: float) -> float:
     """Updates/s of each agent in the whole device loop (act, env step, inserts, a block of
     16 updates per step of 16 envs), after its first 1000 transitions."""
@@ -284,6 +306,9 @@ def device_loop_report(seconds: float, agents: tuple[int, ...] = (1, 4), cpu: bo
             ups = [block_updates_per_s(dev, a, k, seconds) for a in agents]
             row = f"   {name:28s} {k:4d} {plain:8.0f} {path:10.0f}"
             print(row + "".join(f" {u:10.0f}" for u in ups) + f" {ups[0] / path:10.2f}")
+        if dev.type == "cuda":
+            for a in agents:
+                print(f"   {name:28s} block of 16, A={a}: {block_profile(dev, a)}")
         whole = [loop_updates_per_s(dev, a, seconds) for a in agents]
         row = f"   {name:28s} {'env':>4s} {'':8s} {'':10s}"
         print(row + "".join(f" {u:10.0f}" for u in whole) + "   (whole loop, 16 envs, K 16)")
