@@ -308,7 +308,10 @@ def device_loop_report(seconds: float, agents: tuple[int, ...] = (1, 4), cpu: bo
             print(row + "".join(f" {u:10.0f}" for u in ups) + f" {ups[0] / path:10.2f}")
         if dev.type == "cuda":
             for a in agents:
-                print(f"   {name:28s} block of 16, A={a}: {block_profile(dev, a)}")
+                try:
+                    print(f"   {name:28s} block of 16, A={a}: {block_profile(dev, a)}")
+                except Exception as exc:  # noqa: BLE001 - a profiler failure is no bench failure
+                    print(f"   {name:28s} block of 16, A={a}: no profile ({exc})")
         whole = [loop_updates_per_s(dev, a, seconds) for a in agents]
         row = f"   {name:28s} {'env':>4s} {'':8s} {'':10s}"
         print(row + "".join(f" {u:10.0f}" for u in whole) + "   (whole loop, 16 envs, K 16)")
