@@ -454,10 +454,10 @@ class DeviceLoop:
         if not any(owed):
             return
         done_before = max(ag.updates for ag, n in zip(self.agents, owed, strict=True) if n)
-        for j in range(self.k):
-            self.h_flags[j] = (done_before + j + 1) % self.cfgs[0].target_period == 0
-            for i, n in enumerate(owed):
-                self.h_scale[j, i, 0] = 2.0 / self.batch if j < n else 0.0
+        j = np.arange(self.k)
+        self.h_flags.numpy()[:] = (done_before + j + 1) % self.cfgs[0].target_period == 0
+        learns = j[:, None] < np.asarray(owed)[None, :]
+        self.h_scale.numpy()[:, :, 0] = np.where(learns, 2.0 / self.batch, 0.0)
         size, base = self._column_plan()
         self.h_plan[0] = torch.from_numpy(size)
         self.h_plan[1] = torch.from_numpy(size - 1.0)
