@@ -16,11 +16,12 @@
 # Table 2 unchanged but for evaluating every 500,000 updates (not a Table 2 setting).
 set -euo pipefail
 
-usage="usage: scripts/paper_on_gpu.sh [--budget-s S] [--out DIR] [--seed N] [--agents LIST]
-                              [--smoke] [--skip-checks] [--dry-run]
+usage="usage: scripts/paper_on_gpu.sh [--budget-s S] [--out DIR] [--preset P] [--seed N]
+                              [--agents LIST] [--smoke] [--skip-checks] [--dry-run]
   --budget-s S   wall seconds for the whole script (default 540); training gets what is left
   --out DIR      where logs, the run folders and runs.tgz go (default runs/paper_gpu)
-  --seed N       Agent 1's seed (default 1)
+  --preset P     the first agent: paper-agent1 (default) or paper-agent2
+  --seed N       the first agent's seed (default 1)
   --agents LIST  more agents trained together, preset:seed pairs (default paper-agent2:1;
                  e.g. paper-agent2:1,paper-agent1:2,paper-agent1:3; '' for Agent 1 alone)
   --smoke        steps 0-3, then a 30 s training: a first call that measures the machine
@@ -28,6 +29,7 @@ usage="usage: scripts/paper_on_gpu.sh [--budget-s S] [--out DIR] [--seed N] [--a
   --dry-run      print step 4's pd-train command (with the whole budget less 40 s) and exit"
 budget=540
 out=runs/paper_gpu
+first=paper-agent1
 seed=1
 agents=paper-agent2:1
 checks=1
@@ -38,6 +40,7 @@ while [[ $# -gt 0 ]]; do
     case "$1" in
         --budget-s) budget="$2"; shift 2 ;;
         --out) out="$2"; shift 2 ;;
+        --preset) first="$2"; shift 2 ;;
         --seed) seed="$2"; shift 2 ;;
         --agents) agents="$2"; shift 2 ;;
         --smoke) smoke=1; shift ;;
@@ -48,7 +51,7 @@ while [[ $# -gt 0 ]]; do
     esac
 done
 
-train_args=(--preset paper-agent1 --seed "$seed" --num-envs 16 --updates-per-step 16
+train_args=(--preset "$first" --seed "$seed" --num-envs 16 --updates-per-step 16
     --loop device --device auto --eval-every-updates 500000 --progress false
     --run-dir "$out/run")
 [[ -n $agents ]] && train_args+=(--agents "$agents")
@@ -96,7 +99,7 @@ if [[ $left -lt 60 && $smoke == 0 ]]; then
     exit 1
 fi
 minutes=$(minutes_of "$left")
-echo "== 4. pd-train: Agent 1 (seed $seed) and ${agents:-no other agent}, one update per" \
+echo "== 4. pd-train: $first (seed $seed) and ${agents:-no other agent}, one update per" \
     "transition, ${minutes} min"
 "$py" -m pd_core.cli.train "${train_args[@]}" --max-minutes "$minutes" 2>&1 |
     tee "$out/train.log"

@@ -38,6 +38,16 @@ def test_the_training_step_is_table_2_at_one_update_per_transition(tmp_path, cap
     assert cfg["run_dir"] == str(tmp_path / "run")
 
 
+def test_agents_1_and_2_train_together_in_the_device_loop_by_default(tmp_path, capsys):
+    out = script("--dry-run", "--out", str(tmp_path))
+    argv = shlex.split(out.stdout.strip())
+    assert pd_train.main([*argv[1:], "--print-config"]) == 0
+    cfg = json.loads(capsys.readouterr().out)
+    assert (cfg["loop"], cfg["agents"]) == ("device", "paper-agent2:1")
+    alone = shlex.split(script("--dry-run", "--preset", "paper-agent2", "--agents", "").stdout)
+    assert alone[alone.index("--preset") + 1] == "paper-agent2" and "--agents" not in alone
+
+
 def test_a_budget_too_small_to_train_stops_in_one_line(tmp_path):
     out = script("--budget-s", "90", "--skip-checks", "--out", str(tmp_path))
     assert out.returncode == 1
