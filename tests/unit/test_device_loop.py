@@ -112,6 +112,32 @@ def test_agents_together_learn_as_each_alone_and_stop_at_their_own_count(tmp_pat
         assert diff.abs().max() < TOLERANCE
 
 
+def test_a_resumed_loop_continues_bit_for_bit(tmp_path):
+    whole = DeviceLoop([_cfg(tmp_path, "whole")])
+    [s_whole] = whole.run()
+    half = DeviceLoop([_cfg(tmp_path, "half", max_updates=320)])
+    half.run()
+    assert (tmp_path / "half" / "checkpoint.pt").exists()
+    again = DeviceLoop.resume(tmp_path / "half", {"max_updates": 640})
+    [s_again] = again.run()
+    for k in ("env_steps", "updates", "episodes"):
+        assert s_again[k] == s_whole[k], k
+    assert torch.equal(_q(again.q.network(0)), _q(whole.q.network(0)))
+    rows = [
+        len((tmp_path / n / "episodes.csv").read_text().splitlines()) for n in ("whole", "half")
+    ]
+    assert rows[0] == rows[1]
+
+
+def test_pd_train_resumes_a_device_loop_run(tmp_path, capsys):
+    argv = ["--preset", "paper-agent2", "--loop", "device", "--num-envs", "16"]
+    argv += ["--updates-per-step", "16", "--learning-starts", "208", "--eval-every-s", "0"]
+    argv += ["--device", "cpu", "--progress", "false", "--run-dir", str(tmp_path / "run")]
+    assert pd_train.main([*argv, "--max-updates", "32"]) == 0
+    assert pd_train.main(["--resume", str(tmp_path / "run"), "--max-updates", "64"]) == 0
+    assert capsys.readouterr().out.splitlines().count("updates: 64") == 1
+
+
 def test_options_beyond_table_2_are_refused_in_one_line(tmp_path):
     assert device_loop_unsupported(preset("paper-agent1")) == ""
     assert "double_dqn" in device_loop_unsupported(replace(preset("paper-agent1"), double_dqn=True))

@@ -57,19 +57,19 @@ def join_ray(address: str) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
-    from pd_core.dqn.device_loop import uses_device_loop
+    from pd_core.dqn.device_checkpoint import is_loop_checkpoint
+    from pd_core.dqn.device_loop import DeviceLoop, uses_device_loop
     from pd_core.dqn.train import Trainer
 
     if args.resume:
-        if args.loop == "device" or args.agents:
-            print("pd-train: the device loop does not resume (--loop reference)", file=sys.stderr)
-            return 2
         overrides = {
             f.name: getattr(args, f.name)
             for f in fields(TrainConfig)
             if f.name not in ("preset", "resume") and getattr(args, f.name, None) is not None
         }
         try:
+            if is_loop_checkpoint(args.resume):
+                return report(DeviceLoop.resume(args.resume, overrides).run(), args.json)
             trainer = Trainer.resume(args.resume, overrides)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"pd-train: cannot resume from {args.resume}: {exc}", file=sys.stderr)
@@ -124,8 +124,12 @@ def run_device_loop(cfg: TrainConfig, args: argparse.Namespace) -> int:
         return 2
     for c, d in zip(cfgs, run_dirs, strict=True):
         print(f"pd-train: device loop, {c.preset} seed {c.seed}: run folder {d}", file=sys.stderr)
-    summaries = loop.run()
-    if args.json:
+    return report(loop.run(), args.json)
+
+
+def report(summaries: list[dict], as_json: bool) -> int:
+    """Print the device loop's run summaries (one per agent); exit status 0."""
+    if as_json:
         print(json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     else:
         for summary in summaries:

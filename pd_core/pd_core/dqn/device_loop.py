@@ -29,7 +29,8 @@ Counts are the reference loop's: an agent's env transitions, episodes and update
 transition once `learning_starts` transitions are stored; an agent that reaches its `episodes`
 or `max_updates` stops learning, exactly at the count, while the others go on). Evaluations,
 logs (episodes.csv, metrics.csv, evals.csv), curves.png, best and final policy files are those of
-`pd_core.dqn.train`, one run folder per agent. A run is not resumable (it writes no checkpoint).
+`pd_core.dqn.train`, one run folder per agent; `checkpoint.pt` (`pd_core.dqn.device_checkpoint`)
+in the loop's folder every `checkpoint_every_s` and at the end resumes the whole loop.
 """
 
 from __future__ import annotations
@@ -47,9 +48,11 @@ import torch
 from tqdm import tqdm
 
 from pd_core.dqn.agent import epsilon_at
+from pd_core.dqn.checkpoint import write_checkpoint
 from pd_core.dqn.config import TrainConfig, check_config, preset
 from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.device import describe_device, resolve_device
+from pd_core.dqn.device_checkpoint import loop_state, read_loop_checkpoint, restore
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import ReplayMemory
 from pd_core.dqn.run_log import RunLogs, run_folder
@@ -219,6 +222,7 @@ class DeviceLoop:
         host_indices: bool = False,
         quiet: bool = False,
         capacity: int | None = None,
+        home: Path | None = None,
     ) -> None:
         check_agents(cfgs)
         t_start = time.perf_counter()
@@ -264,6 +268,10 @@ class DeviceLoop:
         self.gen.manual_seed(first.seed)
         self._bar: Any = None
         self._last_print = 0.0
+        self.pending = [0] * len(self.agents)
+        first_dir = self.agents[0].run_dir
+        self.home = Path(home or (first_dir if len(self.agents) == 1 else first_dir.parent))
+        self.home.mkdir(parents=True, exist_ok=True)
         self.wall_s = time.perf_counter() - t_start
         self._t0 = t_start
 
@@ -517,12 +525,15 @@ class DeviceLoop:
         show = self.cfgs[0].progress and not self.quiet
         self._bar = tqdm(total=total, unit="ep", smoothing=0.05) if show else None
         self._t0 = time.perf_counter() - self.wall_s
-        last_log, pending = self._now(), [0] * len(self.agents)
+        last_log, last_ckpt, pending = self._now(), self._now(), self.pending
         stop = ""
         while not (stop := self._stop_reason()):
             pending = self.iterate(pending)
             self._retire(pending)
             t = self._now()
+            if t - last_ckpt >= self.cfgs[0].checkpoint_every_s:
+                last_ckpt = t
+                self.checkpoint(pending)
             if t - last_log >= METRICS_PERIOD_S:
                 last_log = t
                 self._log_metrics(t)
@@ -530,11 +541,26 @@ class DeviceLoop:
                 if self._eval_due(agent, t):
                     self._evaluate(agent)
         self.update_block(pending)
+        self.pending = [0] * len(self.agents)
         self.wall_s = self._now()
         out = [self._finish(agent, stop) for agent in self.agents]
+        self.checkpoint(self.pending)
         if self._bar is not None:
             self._bar.close()
         return out
+
+    def checkpoint(self, pending: list[int]) -> Path:
+        """`home`/checkpoint.pt: the whole loop after its last step (`pd-train --resume`)."""
+        return write_checkpoint(self.home, loop_state(self, pending))
+
+    @classmethod
+    def resume(cls, path: str | Path, overrides: dict[str, Any] | None = None) -> DeviceLoop:
+        """The loop of a device-loop checkpoint (its folder or file), with config `overrides`
+        (a later `max_minutes` or `episodes`, another `device`), ready to `run` on."""
+        ckpt, state, cfgs, run_dirs = read_loop_checkpoint(path, overrides)
+        loop = cls(cfgs, run_dirs, home=ckpt.parent)
+        loop.pending = restore(loop, state)
+        return loop
 
     def _retire(self, pending: list[int]) -> None:
         """An agent that reached its episodes or max_updates stops learning (after the updates
