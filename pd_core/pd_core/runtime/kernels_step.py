@@ -92,6 +92,7 @@ def after_actor(
     hand: np.ndarray,
     source: np.ndarray,
     frac: np.ndarray,
+    limit: np.ndarray,
     level_table: np.ndarray,
     table_n: np.ndarray,
     n_per_axis: np.ndarray,
@@ -112,7 +113,7 @@ def after_actor(
     Unless handed_over: actions = proposed and hand (B,) = `handover_row` (rules on); if any
     row is handed over, returns False there (the caller puts the fallback's actions into
     `actions` where `hand` and calls again with handed_over). Then `rules_rows` (actions,
-    source, frac in place) and, with memory, the commands flown enter the pipeline (`issued`)
+    source, frac, limit in place) and, with memory, the commands flown enter the pipeline (`issued`)
     and each row's identified delay and navigation-filter state go to delay, nav (B,)."""
     n = len(proposed)
     if not handed_over:
@@ -125,7 +126,7 @@ def after_actor(
             return False
     rules_rows(
         actions, proposed, hand, states, scale, has_scale, level_table, table_n, n_per_axis, hi,
-        rp, source, frac,
+        rp, source, frac, limit,
     )  # fmt: skip
     if has_memory:
         thrust = np.empty((n, 3))
