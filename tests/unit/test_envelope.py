@@ -130,7 +130,7 @@ def test_a_file_without_the_new_settings_flies_the_historic_values():
     for part, added in ADDED_FIELDS.items():
         assert not set(added) & set(runtime[part])  # shipped before issue 68
     cfg = RuntimeConfig.from_dict(runtime)
-    assert cfg.rules.brake_mass_loss is False
+    assert cfg.rules.brake_mass_loss is False and cfg.latency.unmeasured_thrust == 1.0
     assert load_policy(MODELS / "pd_dqn_ocp.pt").config == cfg
     again = RuntimeConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
     assert again == cfg and "brake_mass_loss" in cfg.to_dict()["rules"]
@@ -139,14 +139,15 @@ def test_a_file_without_the_new_settings_flies_the_historic_values():
 
 
 def test_each_option_changes_the_flight_and_the_record_says_which_limit_fired():
-    """64 `data/beyond.yaml` landers of the shipped file, 40 s: the default fires the
-    constant-mass limit only; with the mass-loss limit that one only, and the layer brakes on
-    fewer steps."""
+    """64 `engine80-100` landers of the shipped file, 40 s: the default fires the constant-mass
+    limit only; with the mass-loss limit that one only, and the layer brakes on fewer steps;
+    counting on the weakest engine until measured, the fraction counted on starts at 0.8."""
     rt0 = load_policy(MODELS / "pd_dqn_ocp.pt")
     runs = {}
     for name, settings in (
         ("default", ""),
         ("mass-loss", "brake_mass_loss=1"),
+        ("weakest", "unmeasured_thrust=0.8"),
     ):
         rt = load_policy(MODELS / "pd_dqn_ocp.pt")
         rt = type(rt)(rt.actor, rt0.config.with_settings(settings), rt.actions, rt.name)
@@ -165,7 +166,8 @@ def test_each_option_changes_the_flight_and_the_record_says_which_limit_fired():
     assert runs["default"][0][2] == 0 and runs["default"][0][1] > 0
     assert runs["mass-loss"][0][1] == 0 and runs["mass-loss"][0][2] > 0
     assert runs["mass-loss"][2] < runs["default"][2]
-    assert np.all(runs["default"][1] == 1.0)
+    assert np.all(runs["default"][1] == 1.0) and np.all(runs["weakest"][1] == 0.8)
+    assert runs["weakest"][2] > runs["default"][2]
 
 
 def test_the_limits_slope_is_what_an_optimiser_linearises():

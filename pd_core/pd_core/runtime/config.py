@@ -120,6 +120,13 @@ class LatencyConfig:
     """(m/s)^2 of commanded vertical velocity change before the window measure is used"""
     jump_m: float = 50.0
     """a row whose position jumps this far from where it was heading starts a new episode"""
+    unmeasured_thrust: float = 1.0
+    """delivered fraction of the vertical thrust the rules count on until the engine has been
+    measured in flight (1: nominal, as every file before issue 68; 0.8: the weakest engine
+    promised); needs `thrust_model`"""
+    measured_gain_sd: float = 0.02
+    """the engine counts as measured once the vertical gain of the lag flown is known to this
+    standard deviation"""
 
     def __post_init__(self) -> None:
         d = self.max_delay_steps
@@ -136,8 +143,16 @@ class LatencyConfig:
             "window_min_evidence",
         ):
             _check(getattr(self, name) >= 0.0, name, getattr(self, name), ">= 0")
-        for name in ("thrust_matrix_prior_sd", "force_noise_n", "window_noise_mps", "jump_m"):
+        for name in (
+            "thrust_matrix_prior_sd",
+            "force_noise_n",
+            "window_noise_mps",
+            "jump_m",
+            "measured_gain_sd",
+        ):
             _check(getattr(self, name) > 0.0, name, getattr(self, name), "> 0")
+        u = self.unmeasured_thrust
+        _check(0.0 < u <= 1.0, "unmeasured_thrust", u, "in (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -273,6 +288,7 @@ class RuntimeConfig:
 
 ADDED_FIELDS: dict[str, dict[str, Any]] = {
     "rules": {"brake_mass_loss": False},
+    "latency": {"unmeasured_thrust": 1.0, "measured_gain_sd": 0.02},
 }
 """fields added after policy files were shipped (issue 68), by part, with the value every file
 written before them flies"""

@@ -33,6 +33,8 @@ def before_actor(
     n_sd: float,
     min_evidence: float,
     noise2: float,
+    unmeasured: float,
+    measured_sd: float,
     issued: np.ndarray,
     last: np.ndarray,
     score: np.ndarray,
@@ -75,7 +77,9 @@ def before_actor(
     ):  # fmt: skip
         return JUMPED
     if want_scale:
-        scale[:] = thrust_scale_rows(rows, delay, gain, cov, win_sums, n_sd, min_evidence, noise2)
+        scale[:] = thrust_scale_rows(
+            rows, delay, gain, cov, win_sums, n_sd, min_evidence, noise2, unmeasured, measured_sd
+        )
     else:
         scale[:] = 1.0
     return VALID
