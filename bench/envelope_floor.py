@@ -3,6 +3,7 @@
 braking). The fuel-optimal OCP from the same nominal states, three ways:
 
     python bench/envelope_floor.py [--episodes 20] [--seed 0] [--margin 0.0 0.7] [--mass-loss]
+        [--counted 1.0]
 
 * unreserved: `ocp.solve(objective="fuel")`, RL limits (the reference of `pd-eval
   --fuel-optimal`);
@@ -18,7 +19,8 @@ braking). The fuel-optimal OCP from the same nominal states, three ways:
 
 v_max is `pd_core.envelope`'s, the law the layer compiles: at the mass now (every file before
 issue 68), or with `--mass-loss` counting on the mass lost while braking
-(`RulesConfig.brake_mass_loss`).
+(`RulesConfig.brake_mass_loss`); `--counted` is the fraction of the engine's thrust the limit
+counts on (1: nominal; 0.8: the weakest engine promised, `LatencyConfig.unmeasured_thrust`).
 """
 
 from __future__ import annotations
@@ -56,13 +58,17 @@ def reserve(f: float) -> ThrustLimits:
     )
 
 
-def excess(states: np.ndarray, mass_loss: bool) -> tuple[float, float]:
+def excess(states: np.ndarray, mass_loss: bool, counted: float) -> tuple[float, float]:
     """(worst descent speed above the layer's limit m/s, share of steps where a 6.5 kN command
-    would be raised) along states (n, 7)."""
+    would be raised) along states (n, 7), the limit counting on `counted` of the thrust."""
     z, vz, m = states[:, 2], states[:, 5], states[:, 6]
     g = -float(GRAVITY_MPS2[2])
-    vmax, _ = descent_limits(z, m, BRAKE_MARGIN * T_MAX_N, LAND_SPEED_MPS, g, mass_loss)
-    raised = [brake_limited(s, T_MAX_N / 2, T_MAX_N, mass_loss=mass_loss) for s in states[:-1]]
+    force = BRAKE_MARGIN * counted * T_MAX_N
+    vmax, _ = descent_limits(z, m, force, LAND_SPEED_MPS, g, mass_loss)
+    top = counted * T_MAX_N
+    raised = [
+        brake_limited(s, counted * T_MAX_N / 2, top, mass_loss=mass_loss) for s in states[:-1]
+    ]
     return float((-vz - vmax).max()), float(np.mean(raised))
 
 
@@ -75,13 +81,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--mass-loss", action="store_true", help="the limit counts on the mass lost while braking"
     )
+    ap.add_argument("--counted", type=float, default=1.0, help="thrust fraction counted on")
+    ap.add_argument("--max-extra", type=float, default=15.0, help="t_f searched beyond, s")
     a = ap.parse_args(argv)
     starts = rollout(make_controller("zemzev"), a.episodes, a.seed).initial_states
     rows = []
     for s in starts:
         ref = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=RL_THRUST)
         res = ocp.solve(s[0:3], s[3:6], s[6], objective="fuel", limits=reserve(a.fraction))
-        worst, raised = excess(res.states, a.mass_loss)
+        worst, raised = excess(res.states, a.mass_loss, a.counted)
         pb = ocp.Problem(s[0:3], s[3:6], s[6], "fuel", 40, reserve(a.fraction))
         p0 = np.column_stack(
             [
@@ -92,9 +100,11 @@ def main(argv: list[str] | None = None) -> int:
         row = [ref.fuel, res.fuel / ref.fuel, worst, raised]
         for mg in a.margin:
             env = BrakeEnvelope(
-                BRAKE_MARGIN, T_MAX_N, LAND_SPEED_MPS, mg, 0.0, 1, mass_loss=a.mass_loss
+                BRAKE_MARGIN, a.counted * T_MAX_N, LAND_SPEED_MPS, mg, 0.0, 1, mass_loss=a.mass_loss
             )
-            out = envelope_fuel_plan(pb, p0, res.time_of_flight, env, new_highs(), 10)
+            out = envelope_fuel_plan(
+                pb, p0, res.time_of_flight, env, new_highs(), 10, max_extra_s=a.max_extra
+            )
             if out is None:
                 row.append(np.nan)
                 continue
@@ -104,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         print(" ".join(f"{v:8.3f}" for v in row), flush=True)
     r = np.array(rows)
     law = "counting on the mass lost while braking" if a.mass_loss else "at the mass now"
-    print(f"the layer's braking limit {law}")
+    print(f"the layer's braking limit {law}, counting on {a.counted:.2f} of the thrust")
     print(
         f"{len(r)} nominal states (seed {a.seed}): unreserved optimum {np.median(r[:, 0]):.1f} kg; "
         f"{a.fraction:.2f} reserve {np.median(r[:, 1]):.3f}x, above the layer's limit by "
