@@ -29,7 +29,6 @@ _R_HALT, _R_HMASS, _R_FBRAKE, _R_FMARGIN, _R_FLAND, _R_FMINBRAKE, _R_RAISED, _R_
     8, 17
 )
 _R_MASSLOSS = 17
-N_RULE_PARAMS = 18
 
 
 @njit(cache=True)
