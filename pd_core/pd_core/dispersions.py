@@ -11,6 +11,12 @@ once per episode at reset, from the episode's own seeded Generator and after the
   initial state, gusts and mass (common random numbers: scenarios compare with less noise);
 - stepping needs no random numbers (the navigation noise of the episode is drawn at reset).
 
+The parts added for issue 68 (`thrust_factor`, its onset, the navigation bias, the steady wind)
+draw from a second stream seeded by the episode's navigation seed, and only in scenarios that use
+one of them: every scenario without them flies exactly what it flew before they existed, and the
+scenarios with them share those draws too (in a fixed order: factor, onset, the position bias's
+direction and size, the velocity bias's, the wind's direction).
+
 The magnitudes of `SCENARIOS` are ours, chosen at or beyond what flight Monte Carlo campaigns use
 (each field says why). `load_scenarios` reads a scenario name, a comma-separated list, the
 campaign `standard`, or a YAML file.
@@ -25,12 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from pd_core.config import ISP_S, TABLE3, StateRange
+from pd_core.config import DT_S, ISP_S, TABLE3, StateRange
 
 STATE_DIM = 7
 # per-episode draws of a non-nominal scenario, in this order: mass (1 uniform), thruster gains
 # (3 uniforms), Isp (1 uniform), misalignment axis (3 normals) and angle (1 uniform), the seed of
-# the episode's navigation-noise stream (1 integer).
+# the episode's navigation-noise stream (1 integer). Scenarios with an issue-68 part then draw
+# from a stream seeded by [that integer, 68]: factor (1 uniform), onset (1 uniform), position bias
+# direction (3 normals) and size (1 uniform), velocity bias the same, wind direction (1 uniform).
 
 
 @dataclass(frozen=True)
@@ -76,6 +84,23 @@ class Dispersions:
     """the initial-state box is Table 3 widened by this fraction of its width on each side of
     every varied component (mass excluded). `wide-box`: 0.25 (x 225-1275 m, y +-1650 m,
     z 2350-2650 m, vx -92.5..12.5, vy +-52.5, vz -102.5..-57.5 m/s)."""
+    thrust_factor: tuple[float, float] | None = None
+    """one factor f, uniform in this range and the same for the three thrusters, multiplies
+    every delivered thrust (after `thrust_error`), unknown to the policy. `data/beyond.yaml`:
+    0.8-1.0, an engine anywhere between the weakest promised and nominal."""
+    thrust_factor_onset_s: tuple[float, float] | None = None
+    """the factor takes effect at a time uniform in this range (s from the episode's start,
+    whole steps: before it the engine delivers nominal thrust); None: from ignition."""
+    nav_position_bias_m: float = 0.0
+    """a constant error on the observed position for the whole episode: size uniform in
+    [0, this] m, direction uniform on the sphere. Unlike the white noise, no filter can
+    average it out."""
+    nav_velocity_bias_mps: float = 0.0
+    """a constant error on the observed velocity: size uniform in [0, this] m/s, direction
+    uniform on the sphere (independent of the position bias's)."""
+    wind_force_n: float = 0.0
+    """a steady horizontal force of this size (N), in a uniformly random horizontal direction
+    fixed for the episode, added to the disturbance of Sec. 3.2 (and applied without it)."""
 
     def __post_init__(self) -> None:
         if self.mass_kg is not None:
@@ -85,6 +110,22 @@ class Dispersions:
                     f"{self.name}: mass_kg must be 0 < low <= high, got {self.mass_kg}"
                 )
             object.__setattr__(self, "mass_kg", (lo, hi))
+        if self.thrust_factor is not None:
+            lo, hi = (float(v) for v in self.thrust_factor)
+            if not 0.0 < lo <= hi <= 2.0:
+                raise ValueError(
+                    f"{self.name}: thrust_factor must be 0 < low <= high <= 2, "
+                    f"got {self.thrust_factor}"
+                )
+            object.__setattr__(self, "thrust_factor", (lo, hi))
+        if self.thrust_factor_onset_s is not None:
+            lo, hi = (float(v) for v in self.thrust_factor_onset_s)
+            if self.thrust_factor is None or not 0.0 <= lo <= hi:
+                raise ValueError(
+                    f"{self.name}: thrust_factor_onset_s must be 0 <= low <= high, with a "
+                    f"thrust_factor, got {self.thrust_factor_onset_s}"
+                )
+            object.__setattr__(self, "thrust_factor_onset_s", (lo, hi))
         for f in ("thrust_error", "isp_error"):
             if not 0.0 <= getattr(self, f) < 1.0:
                 raise ValueError(f"{self.name}: {f} must be in [0, 1), got {getattr(self, f)}")
@@ -96,6 +137,9 @@ class Dispersions:
             "nav_mass_sigma_kg": self.nav_mass_sigma_kg >= 0.0,
             "disturbance_scale": self.disturbance_scale >= 0.0,
             "box_widen": 0.0 <= self.box_widen <= 10.0,
+            "nav_position_bias_m": self.nav_position_bias_m >= 0.0,
+            "nav_velocity_bias_mps": self.nav_velocity_bias_mps >= 0.0,
+            "wind_force_n": 0.0 <= self.wind_force_n <= 1e4,
         }
         bad = [f"{k}={getattr(self, k)!r}" for k, ok in checks.items() if not ok]
         if bad:
@@ -116,6 +160,15 @@ class Dispersions:
     def has_nav_noise(self) -> bool:
         return bool(np.any(self.nav_sigma > 0.0))
 
+    @property
+    def has_nav_bias(self) -> bool:
+        return self.nav_position_bias_m > 0.0 or self.nav_velocity_bias_mps > 0.0
+
+    @property
+    def has_issue68_parts(self) -> bool:
+        """True where the scenario draws from the second stream (see the module docstring)."""
+        return self.thrust_factor is not None or self.has_nav_bias or self.wind_force_n > 0.0
+
     def initial_box(self, base: StateRange = TABLE3) -> StateRange:
         """`base` widened by `box_widen` of its width on each side (mass excluded)."""
         if self.box_widen == 0.0:
@@ -126,7 +179,8 @@ class Dispersions:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        d["mass_kg"] = None if self.mass_kg is None else list(self.mass_kg)
+        for f in ("mass_kg", "thrust_factor", "thrust_factor_onset_s"):
+            d[f] = None if d[f] is None else list(d[f])
         return d
 
     @classmethod
@@ -136,8 +190,9 @@ class Dispersions:
         if unknown:
             raise ValueError(f"unknown dispersion field(s) {unknown}; known: {sorted(known)}")
         d = dict(d)
-        if d.get("mass_kg") is not None:
-            d["mass_kg"] = tuple(d["mass_kg"])
+        for f in ("mass_kg", "thrust_factor", "thrust_factor_onset_s"):
+            if d.get(f) is not None:
+                d[f] = tuple(d[f])
         if "delay_steps" in d:
             d["delay_steps"] = int(d["delay_steps"])
         return cls(**d)
@@ -272,6 +327,10 @@ class EpisodeDraws:
     isp_s: float
     rotation: np.ndarray  # (3, 3) misalignment of the delivered thrust
     nav_noise: np.ndarray | None  # (n_steps + 1, 7) added to the observed state, or None
+    thrust_factor: float = 1.0  # one factor on every delivered thrust, from thrust_onset_step
+    thrust_onset_step: int = 0  # first step (0.2 s) the factor acts on
+    nav_bias: np.ndarray | None = None  # (7,) added to every observed state, or None
+    wind_n: np.ndarray | None = None  # (3,) steady force, N, or None
 
 
 def draw_episode(rng: np.random.Generator, d: Dispersions, n_steps: int) -> EpisodeDraws:
@@ -287,13 +346,39 @@ def draw_episode(rng: np.random.Generator, d: Dispersions, n_steps: int) -> Epis
     nav = None
     if d.has_nav_noise:
         nav = np.random.default_rng(nav_seed).normal(size=(n_steps + 1, STATE_DIM)) * d.nav_sigma
-    return EpisodeDraws(
+    out = EpisodeDraws(
         mass_kg=mass,
         thrust_gain=1.0 + d.thrust_error * u_thrust,
         isp_s=ISP_S * (1.0 + d.isp_error * u_isp),
         rotation=rotation_matrix(axis, angle),
         nav_noise=nav,
     )
+    if d.has_issue68_parts:
+        _draw_issue68(np.random.default_rng([nav_seed, 68]), d, out)
+    return out
+
+
+def _draw_issue68(rng: np.random.Generator, d: Dispersions, out: EpisodeDraws) -> None:
+    """The thrust factor and its onset, the navigation bias and the wind of one episode, into
+    out (always the same draws, in the order of the module's comment)."""
+    u_factor, u_onset = rng.uniform(), rng.uniform()
+    bias = []
+    for _ in range(2):
+        direction = rng.normal(size=3)
+        bias.append(direction / np.linalg.norm(direction) * rng.uniform())
+    heading = 2.0 * math.pi * rng.uniform()
+    if d.thrust_factor is not None:
+        lo, hi = d.thrust_factor
+        out.thrust_factor = lo + u_factor * (hi - lo)
+        if d.thrust_factor_onset_s is not None:
+            t0, t1 = d.thrust_factor_onset_s
+            out.thrust_onset_step = round((t0 + u_onset * (t1 - t0)) / DT_S)
+    if d.has_nav_bias:
+        out.nav_bias = np.concatenate(
+            [bias[0] * d.nav_position_bias_m, bias[1] * d.nav_velocity_bias_mps, [0.0]]
+        )
+    if d.wind_force_n > 0.0:
+        out.wind_n = d.wind_force_n * np.array([math.cos(heading), math.sin(heading), 0.0])
 
 
 def rotation_matrix(axis: np.ndarray, angle_rad: float) -> np.ndarray:
@@ -347,6 +432,11 @@ class DispersionArrays:
         self.fifo = np.zeros((n, dmax + 1, 3)) if dmax else None
         nav = any(d.has_nav_noise for d in scenarios)
         self.nav_noise = np.zeros((n, max_steps + 1, STATE_DIM)) if nav else None
+        factor = any(d.thrust_factor is not None for d in scenarios)
+        self.thrust_factor = np.ones(n) if factor else None
+        self.thrust_onset_step = np.zeros(n, dtype=np.int64) if factor else None
+        self.nav_bias = np.zeros((n, STATE_DIM)) if any(d.has_nav_bias for d in scenarios) else None
+        self.wind_n = np.zeros((n, 3)) if any(d.wind_force_n > 0.0 for d in scenarios) else None
 
     def set_episode(self, i: int, k: int, d: Dispersions, dr: EpisodeDraws) -> None:
         """Lander i starts an episode of scenario k (= d) with draws dr."""
@@ -360,26 +450,47 @@ class DispersionArrays:
             self.fifo[i] = 0.0
         if self.nav_noise is not None:
             self.nav_noise[i] = 0.0 if dr.nav_noise is None else dr.nav_noise
+        if self.thrust_factor is not None:
+            self.thrust_factor[i] = dr.thrust_factor
+            self.thrust_onset_step[i] = dr.thrust_onset_step
+        if self.nav_bias is not None:
+            self.nav_bias[i] = 0.0 if dr.nav_bias is None else dr.nav_bias
+        if self.wind_n is not None:
+            self.wind_n[i] = 0.0 if dr.wind_n is None else dr.wind_n
 
     def plant(
-        self, idx: np.ndarray | slice, command_n: np.ndarray
+        self, idx: np.ndarray | slice, command_n: np.ndarray, steps: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(delivered thrust (M, 3) in N, specific impulse (M,) in s) of landers idx this step:
-        the command enters the FIFO, the delayed command leaves it and goes through the errors."""
+        """(delivered thrust (M, 3) in N, specific impulse (M,) in s) of landers idx this step
+        (`steps` (M,): steps flown so far, for the thrust factor's onset): the command enters the
+        FIFO, the delayed command leaves it and goes through the errors."""
         applied = command_n
         if self.fifo is not None:
             fifo = np.concatenate([command_n[:, None], self.fifo[idx][:, :-1]], axis=1)
             self.fifo[idx] = fifo
             applied = fifo[np.arange(len(fifo)), self.delay_steps[idx]]
         rot = None if self.rotation is None else self.rotation[idx]
-        return delivered_thrust(applied, self.thrust_gain[idx], rot), self.isp_s[idx]
+        gain = self.thrust_gain[idx]
+        if self.thrust_factor is not None:
+            if steps is None:
+                raise ValueError("plant: a thrust factor needs the steps flown")
+            on = steps >= self.thrust_onset_step[idx]
+            gain = gain * np.where(on, self.thrust_factor[idx], 1.0)[:, None]
+        return delivered_thrust(applied, gain, rot), self.isp_s[idx]
+
+    def wind(self, idx: np.ndarray | slice) -> np.ndarray | None:
+        """The steady force (M, 3) in N on landers idx, or None where no scenario has wind."""
+        return None if self.wind_n is None else self.wind_n[idx]
 
     def observed(self, states: np.ndarray, steps: np.ndarray) -> np.ndarray:
         """What the agent observes of true states (N, 7) after `steps` steps."""
-        if self.nav_noise is None:
-            return states.copy()
-        k = np.minimum(steps, self.nav_noise.shape[1] - 1)
-        return states + self.nav_noise[np.arange(len(states)), k]
+        out = states.copy() if self.nav_noise is None else None
+        if self.nav_noise is not None:
+            k = np.minimum(steps, self.nav_noise.shape[1] - 1)
+            out = states + self.nav_noise[np.arange(len(states)), k]
+        if self.nav_bias is not None:
+            out += self.nav_bias
+        return out
 
     def state_dict(self) -> dict[str, np.ndarray]:
         return {k: v.copy() for k, v in vars(self).items() if v is not None}

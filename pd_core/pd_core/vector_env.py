@@ -179,7 +179,10 @@ class PoweredDescentVectorEnv:
             force = np.zeros_like(thrust)
         if self._nominal:
             return transition(states, thrust, force, self.dt_s, self.reward_cfg, self._thrust_max)
-        plant, isp = self._disp.plant(idx, thrust)
+        wind = self._disp.wind(idx)
+        if wind is not None:
+            force = force + wind
+        plant, isp = self._disp.plant(idx, thrust, steps)
         return transition(
             states,
             thrust,

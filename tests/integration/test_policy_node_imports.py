@@ -20,5 +20,5 @@ def test_the_policy_node_module_imports_nothing_heavy():
     assert out.returncode == 0, out.stderr[-2000:]
     loaded = out.stdout.split()
     assert "rclpy" in loaded and "pd_core.runtime.layer" in loaded
-    heavy = [m for m in loaded if m.split(".")[0] in HEAVY or m.startswith(HEAVY)]
-    assert heavy == [], heavy
+    heavy = [m for m in loaded if any(m == h or m.startswith(h + ".") for h in HEAVY)]
+    assert heavy == [], heavy  # (`pd_core.envelope`, the braking law, is not `pd_core.env`)

@@ -193,3 +193,90 @@ def test_scenario_probs_steer_the_draws_and_survive_a_state_dict():
     np.testing.assert_allclose(other.scenario_probs, [0.1, 0.1, 0.8])
     with pytest.raises(ValueError, match="3 non-negative"):
         env.set_scenario_probs(np.array([0.5, 0.5]))
+
+
+# --- issue 68: one thrust factor (and its onset), navigation bias, steady wind -----------------
+
+
+def test_one_thrust_factor_scales_every_thruster_from_ignition():
+    env = _env(Dispersions("f", thrust_factor=(0.8, 1.0)))
+    f = env._disp.thrust_factor.copy()
+    assert f.min() >= 0.8 and f.max() <= 1.0 and np.ptp(f) > 0.15
+    s0 = env.states.copy()
+    cmd = env.actions.thrust(np.full(N, 146))
+    for _ in range(20):
+        env.step(np.full(N, 146))
+    want = s0
+    for _ in range(20):
+        want = dynamics.step(want, cmd * f[:, None], np.zeros((N, 3)), DT_S)
+    np.testing.assert_allclose(env.states, want, rtol=1e-12, atol=1e-9)
+
+
+def test_a_late_thrust_factor_acts_from_its_onset_step_only():
+    d = Dispersions("late", thrust_factor=(0.8, 0.8), thrust_factor_onset_s=(2.0, 6.0))
+    env = _env(d)
+    onset = env._disp.thrust_onset_step.copy()
+    assert onset.min() >= 10 and onset.max() <= 30 and np.ptp(onset) > 10
+    s = env.states.copy()
+    cmd = env.actions.thrust(np.full(N, 146))
+    for k in range(40):
+        env.step(np.full(N, 146))
+        gain = np.where(k >= onset, 0.8, 1.0)[:, None]
+        s = dynamics.step(s, cmd * gain, np.zeros((N, 3)), DT_S)
+    np.testing.assert_allclose(env.states, s, rtol=1e-12, atol=1e-9)
+
+
+def test_navigation_bias_is_constant_bounded_and_on_the_observation_only():
+    d = Dispersions("bias", nav_position_bias_m=5.0, nav_velocity_bias_mps=0.2)
+    biased, clean = _env(d, 400), _env("nominal", 400)
+    first = biased.observed_states - biased.states
+    for _ in range(30):
+        _, _, _, _, info = biased.step(np.full(400, HOVER))
+        clean.step(np.full(400, HOVER))
+    np.testing.assert_array_equal(biased.states, clean.states)
+    np.testing.assert_allclose(info["observed_state"] - info["state"], first, atol=1e-9)
+    r, v = np.linalg.norm(first[:, 0:3], axis=1), np.linalg.norm(first[:, 3:6], axis=1)
+    assert r.max() <= 5.0 and v.max() <= 0.2 and np.all(first[:, 6] == 0.0)
+    assert 2.0 < r.mean() < 3.0 and 0.08 < v.mean() < 0.12  # size uniform in [0, max]
+    assert np.all(np.abs(first[:, 0:3].mean(axis=0)) < 0.5)  # no preferred direction
+
+
+def test_steady_wind_is_a_horizontal_force_of_its_size():
+    env = _env(Dispersions("wind", wind_force_n=400.0))
+    w = env._disp.wind_n.copy()
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1), 400.0, rtol=1e-12)
+    assert np.all(w[:, 2] == 0.0) and np.ptp(np.arctan2(w[:, 1], w[:, 0])) > 5.0
+    s = env.states.copy()
+    for _ in range(25):
+        env.step(np.full(N, HOVER))
+        s = dynamics.step(s, env.actions.thrust(np.full(N, HOVER)), w, DT_S)
+    np.testing.assert_allclose(env.states, s, rtol=1e-12, atol=1e-9)
+
+
+def test_the_new_parts_leave_every_other_draw_as_it_was():
+    """A scenario with an issue-68 part draws the same initial state, mass and thruster gains
+    as the same scenario without it (their draws come from a second stream)."""
+    old = _env(Dispersions("m", mass_kg=(1800.0, 2200.0), thrust_error=0.05))
+    new = _env(
+        Dispersions("m68", mass_kg=(1800.0, 2200.0), thrust_error=0.05, thrust_factor=(0.9, 1.0),
+                    nav_position_bias_m=1.0, wind_force_n=100.0)
+    )  # fmt: skip
+    np.testing.assert_array_equal(old.states, new.states)
+    np.testing.assert_array_equal(old._disp.thrust_gain, new._disp.thrust_gain)
+    np.testing.assert_array_equal(old._knots, new._knots)
+
+
+def test_the_beyond_campaign_file_loads_and_round_trips():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "data" / "beyond.yaml"
+    scen = load_scenarios(str(path))
+    assert [d.name for d in scen] == [
+        "engine80-100", "engine80-100-late", "nav-bias", "heavy15-25", "delay2", "wind400",
+        "combined",
+    ]  # fmt: skip
+    for d in scen:
+        assert Dispersions.from_dict(d.to_dict()) == d and not d.nominal
+    assert scen[0].thrust_factor == (0.8, 1.0) and scen[3].mass_kg == (2300.0, 2500.0)
+    with pytest.raises(ValueError, match="thrust_factor_onset_s"):
+        Dispersions("x", thrust_factor_onset_s=(1.0, 2.0))

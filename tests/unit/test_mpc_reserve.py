@@ -195,6 +195,26 @@ def test_envelope_plan_stays_inside_the_layers_limit_and_costs_more_than_the_res
     assert DEFAULT_ACTIONS.limits.hi[2] == T_MAX_N
 
 
+@pytest.mark.timeout(300)
+def test_counting_the_mass_lost_while_braking_lets_a_cheaper_plan_inside() -> None:
+    """The limit of issue 68 (`pd_core.envelope`, mass loss) is wider than the limit at the mass
+    now: the 0.9 reserve optimum overshoots it by less, and the cheapest plan found inside it
+    burns less than inside the old one, still no less than the reserve optimum."""
+    pb, res = _reserve_problem(0)
+    old = BrakeEnvelope(BRAKE_MARGIN, T_MAX_N, LAND_SPEED_MPS, 0.0, 0.0, 1)
+    new = BrakeEnvelope(BRAKE_MARGIN, T_MAX_N, LAND_SPEED_MPS, 0.0, 0.0, 1, mass_loss=True)
+    g = pb.grid(res.time_of_flight)
+    assert envelope_excess(pb, g, res.thrust, new) < envelope_excess(pb, g, res.thrust, old)
+    fuel = {}
+    for name, env in (("old", old), ("new", new)):
+        out = envelope_fuel_plan(pb, res.thrust, res.time_of_flight, env, LPSolver(), 10)
+        assert out is not None
+        fl = pb.fly(out[0], pb.grid(out[1]))
+        assert envelope_excess(pb, pb.grid(out[1]), out[0], env) <= 0.05
+        fuel[name] = fl.fuel
+    assert res.fuel - 1e-6 <= fuel["new"] < fuel["old"]
+
+
 def test_lateral_settle_ends_the_horizontal_motion_before_the_plan_ends() -> None:
     pb, res = _reserve_problem(2)
     g = pb.grid(res.time_of_flight)

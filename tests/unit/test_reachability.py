@@ -17,7 +17,9 @@ from pd_core.dispersions import NOMINAL, SCENARIOS, Dispersions, rotation_matrix
 from pd_core.experiments.evaluate import rollout
 from pd_core.experiments.reachability import (
     braking_authority,
+    delivered_limits,
     episode_starts,
+    plan_gains,
     reachable,
     touchdown_speed_bound,
 )
@@ -55,6 +57,43 @@ def test_rebuilt_draws_explain_every_step_flown():
         np.testing.assert_allclose(nxt, path[1:], rtol=1e-12, atol=1e-9)
     _, nominal = episode_starts(NOMINAL, 5, [0])
     assert np.all(nominal[0].thrust_gain == 1.0) and nominal[0].isp_s == ISP_S
+
+
+def test_rebuilt_draws_explain_the_beyond_parts_flown():
+    """The thrust factor from its onset step, the steady wind and the 2-step delay of a
+    `data/beyond.yaml`-like scenario, rebuilt, explain every step to 1e-9 m (no disturbance)."""
+    d = Dispersions(
+        "mix", thrust_factor=(0.8, 1.0), thrust_factor_onset_s=(2.0, 20.0), delay_steps=2,
+        wind_force_n=400.0, nav_position_bias_m=5.0,
+    )  # fmt: skip
+    ro = rollout(make_controller("zemzev"), 6, 5, False, keep_trajectories=6, dispersions=d)
+    _, draws = episode_starts(d, 5, range(6))
+    for path, acts, dr in zip(ro.trajectories, ro.actions, draws, strict=True):
+        cmd = DEFAULT_ACTIONS.thrust(acts)
+        applied = np.concatenate([np.zeros((2, 3)), cmd])[: len(cmd)]
+        k = np.arange(len(cmd))[:, None]
+        gain = dr.thrust_gain * np.where(k >= dr.thrust_onset_step, dr.thrust_factor, 1.0)
+        wind = np.broadcast_to(dr.wind_n, applied.shape)
+        nxt = dynamics.step(path[:-1], gain * applied, wind, DT_S, isp_s=dr.isp_s)
+        np.testing.assert_allclose(nxt, path[1:], rtol=1e-12, atol=1e-9)
+        assert 10 <= dr.thrust_onset_step <= 100 and dr.nav_bias is not None
+        weakest, strongest = plan_gains(dr)
+        np.testing.assert_array_equal(weakest, dr.thrust_gain * dr.thrust_factor)
+        np.testing.assert_array_equal(strongest, dr.thrust_gain)
+
+
+def test_the_wind_shifts_what_the_plan_may_ask_of_the_thrusters():
+    lim = delivered_limits(np.full(3, 0.9), wind_n=np.array([400.0, -300.0, 0.0]))
+    np.testing.assert_allclose(lim.lo, [-9000.0 + 400.0, -9000.0 - 300.0, 0.0])
+    np.testing.assert_allclose(lim.hi, [9000.0 + 400.0, 9000.0 - 300.0, 11700.0])
+    # Table 3's centre at 85 % thrust lands against a 400 N wind; the proof ignores the wind
+    s0 = np.array([750.0, 0.0, 2500.0, -40.0, 0.0, -80.0, 2000.0])
+    v = reachable(s0, np.full(3, 0.85), wind_n=np.array([0.0, 400.0, 0.0]))
+    assert v.status == "reachable"
+    # an engine that weakens late: the proof counts on the strongest gains, the plan the weakest
+    fast = np.array([0.0, 0.0, 1500.0, 0.0, 0.0, -95.0, 2000.0])
+    assert reachable(fast, np.full(3, 0.8)).out_of_reach
+    assert not reachable(fast, np.full(3, 0.8), bound_thrust_gain=np.ones(3)).out_of_reach
 
 
 def test_a_table1_corner_is_reachable_with_the_worst_thrusters():

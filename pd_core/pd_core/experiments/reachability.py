@@ -39,6 +39,14 @@ disturbance, so only "reachable" verdicts carry these approximations):
   early; noise only corrupts what the agent observes).
 - Disturbance: left out of both (zero-mean; 300 N per axis in `all`, ~2 % of the 13 kN, and
   its average over a 30 s braking burn a fraction of that).
+- A thrust factor (`Dispersions.thrust_factor`) that starts mid-flight: the plan counts on the
+  weakest gains of the episode throughout, the proof on the strongest (`plan_gains`), so both
+  tests stay one-sided.
+- A steady wind (`Dispersions.wind_force_n`, horizontal): the plan's horizontal limits are the
+  delivered ones shifted by the wind (what the thrusters can add to it). The plan burns mass on
+  its own force, the lander on force minus wind: at 400 N at most 0.2 kg/s less or more, about
+  10 kg over a landing (0.5 % of the mass). The proof is vertical: the wind does not enter.
+- A navigation bias, like the noise, only corrupts what the agent observes.
 """
 
 from __future__ import annotations
@@ -98,6 +106,8 @@ def episode_starts(
     env.reset(seed=[seed + i for i in idx])
     sd = env.state_dict()
     rot, nav = sd.get("rotation"), sd.get("nav_noise")
+    factor, onset = sd.get("thrust_factor"), sd.get("thrust_onset_step")
+    bias, wind = sd.get("nav_bias"), sd.get("wind_n")
     draws = [
         EpisodeDraws(
             mass_kg=None if scenario.mass_kg is None else float(env.states[j, 6]),
@@ -105,23 +115,43 @@ def episode_starts(
             isp_s=float(sd["isp_s"][j]),
             rotation=np.eye(3) if rot is None else rot[j].copy(),
             nav_noise=nav[j].copy() if nav is not None and scenario.has_nav_noise else None,
+            thrust_factor=1.0 if factor is None else float(factor[j]),
+            thrust_onset_step=0 if onset is None else int(onset[j]),
+            nav_bias=None if bias is None or not scenario.has_nav_bias else bias[j].copy(),
+            wind_n=None if wind is None or not scenario.wind_force_n else wind[j].copy(),
         )
         for j in range(len(idx))
     ]
     return env.initial_states.copy(), draws
 
 
-def delivered_limits(thrust_gain: np.ndarray, limits: ThrustLimits = RL_THRUST) -> ThrustLimits:
-    """Per-axis thrust (N) the plant can deliver: the command limits times the gains."""
+def plan_gains(draws: EpisodeDraws) -> tuple[np.ndarray, np.ndarray]:
+    """(weakest, strongest) delivered / commanded thrust (3,) per thruster over an episode: the
+    per-thruster gains times the thrust factor, before its onset times 1."""
+    g = np.asarray(draws.thrust_gain, dtype=float)
+    f = draws.thrust_factor
+    if draws.thrust_onset_step <= 0:
+        return g * f, g * f
+    return g * min(f, 1.0), g * max(f, 1.0)
+
+
+def delivered_limits(
+    thrust_gain: np.ndarray, limits: ThrustLimits = RL_THRUST, wind_n: np.ndarray | None = None
+) -> ThrustLimits:
+    """Per-axis force (N) the plant can put on the lander: the command limits times the gains,
+    plus a steady force `wind_n` (3,) where given."""
     g = np.asarray(thrust_gain, dtype=float)
-    return ThrustLimits(tuple((limits.lo * g).tolist()), tuple((limits.hi * g).tolist()))
+    w = np.zeros(3) if wind_n is None else np.asarray(wind_n, dtype=float)
+    return ThrustLimits(tuple((limits.lo * g + w).tolist()), tuple((limits.hi * g + w).tolist()))
 
 
-def unpowered(state: np.ndarray, steps: int) -> np.ndarray:
-    """State (7,) after `steps` steps without thrust or disturbance (the delay FIFO's zeros)."""
+def unpowered(state: np.ndarray, steps: int, wind_n: np.ndarray | None = None) -> np.ndarray:
+    """State (7,) after `steps` steps without thrust or disturbance (the delay FIFO's zeros),
+    under the steady force `wind_n` (3,) N where given."""
     s = np.asarray(state, dtype=float)
+    force = _ZERO if wind_n is None else np.asarray(wind_n, dtype=float)
     for _ in range(steps):
-        s = step(s, _ZERO, _ZERO, DT_S)
+        s = step(s, _ZERO, force, DT_S)
     return s
 
 
@@ -249,20 +279,26 @@ def reachable(
     delay_steps: int = 0,
     max_time_s: float = MAX_EPISODE_TIME_S,
     rotation: np.ndarray | None = None,
+    *,
+    wind_n: np.ndarray | None = None,
+    bound_thrust_gain: np.ndarray | None = None,
 ) -> Verdict:
     """Can a lander starting at state0 (7,) [r m, v m/s, mass kg], whose thrusters deliver
     thrust_gain (3,) x their command at Isp isp_s (s), rotated by `rotation` (3, 3), after
-    delay_steps unpowered 0.2 s steps, land within max_time_s without disturbance? See the
-    module docstring for the two tests.
+    delay_steps unpowered 0.2 s steps, land within max_time_s without disturbance (but with the
+    steady horizontal force `wind_n` (3,) N)? See the module docstring for the two tests; the
+    proof counts on `bound_thrust_gain` (3,) where the gains change in flight (default:
+    thrust_gain).
 
     The fuel optimum to the pad is always solved: for an episode out of reach it is the
     evidence (it fails, or reaches the pad only through the ground). The proof wins over an OCP
     plan (flown at Isp 210 s, unrotated), which can only disagree within those errors.
     """
-    lim = delivered_limits(thrust_gain)
-    s = unpowered(state0, delay_steps)
+    lim = delivered_limits(thrust_gain, wind_n=wind_n)
+    s = unpowered(state0, delay_steps, wind_n)
     horizon_s = max_time_s - delay_steps * DT_S
-    bound = touchdown_speed_bound(state0, thrust_gain, isp_s, delay_steps, max_time_s, rotation)
+    top = thrust_gain if bound_thrust_gain is None else bound_thrust_gain
+    bound = touchdown_speed_bound(state0, top, isp_s, delay_steps, max_time_s, rotation)
     res, ok = _plan(s, lim, "fuel", 0.0, horizon_s)
     zmin = float(res.states[:, 2].min()) if res.success else math.nan
     if bound >= REWARD.v_lim_mps:
@@ -331,9 +367,11 @@ def campaign_reachability(
             raise ValueError(f"{d.name}: rebuilt episode starts differ from the flown ones")
         rep = ScenarioReach(checked=idx)
         for i, s, dr in zip(idx, states, draws, strict=True):
+            weakest, strongest = plan_gains(dr)
             rep.verdicts[i] = reachable(
-                s, dr.thrust_gain, dr.isp_s, d.delay_steps, max_time_s, dr.rotation
-            )
+                s, weakest, dr.isp_s, d.delay_steps, max_time_s, dr.rotation,
+                wind_n=dr.wind_n, bound_thrust_gain=strongest,
+            )  # fmt: skip
             if on_episode is not None:
                 on_episode()
         out[d.name] = rep
@@ -350,6 +388,7 @@ __all__ = [
     "delivered_limits",
     "episode_starts",
     "failed_episodes",
+    "plan_gains",
     "reachable",
     "touchdown_speed_bound",
     "unpowered",

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from pd_core.config import GRAVITY_MPS2
+from pd_core.envelope import descent_limits
 from pd_core.ocp import kernels
 from pd_core.ocp.lp import solve_lp
 from pd_core.ocp.model import (
@@ -54,14 +55,13 @@ def fuel_weights(g: Grid) -> np.ndarray:
 @dataclass(frozen=True)
 class BrakeEnvelope:
     """A braking envelope on the plan (the receding-horizon teacher's; ours): at the end of
-    every `every`-th step (and the last 10), descent speed <= v_max(z, m) - margin_mps with
-
-        v_max(z, m) = sqrt(land_speed^2 + 2 (z + gate_m) (thrust_margin T_max / m - g)),
-
-    the runtime layer's braking limit (`pd_core.runtime.rules.max_descent_speed_mps`; z is the
-    altitude above the plan's target, gate_m below the pad's altitude). A plan inside it keeps
-    the vertical reserve the layer counts on at the mass it has *now*, not at the lighter mass
-    it will have when it brakes. Linearised at the current plan (mass frozen), as the floor."""
+    every `every`-th step (and the last 10), descent speed <= v_max(z + gate_m, m) - margin_mps
+    with v_max the runtime layer's braking limit for the force thrust_margin x T_max
+    (`pd_core.envelope.descent_limits`: at the mass now, or counting on the mass lost while
+    braking where `mass_loss`; z is the altitude above the plan's target, gate_m below the
+    pad's altitude). At the mass now, a plan inside it keeps the vertical reserve the layer
+    counts on at the mass it has *now*, not at the lighter mass it will have when it brakes.
+    Linearised at the current plan (mass frozen), as the floor."""
 
     thrust_margin: float
     max_vertical_thrust_n: float
@@ -70,6 +70,13 @@ class BrakeEnvelope:
     gate_m: float = 0.0
     every: int = 2
     elastic_kg_per_mps: float = 20.0  # cost of a row's violation in the LP (see fuel_lp_plan)
+    mass_loss: bool = False
+
+    def limits(self, altitude_m: np.ndarray, mass_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(v_max, dv_max/dz) at the altitudes above the pad (n,) and masses (n,)."""
+        force = self.thrust_margin * self.max_vertical_thrust_n
+        g = -float(GRAVITY_MPS2[2])
+        return descent_limits(altitude_m, mass_kg, force, self.land_speed_mps, g, self.mass_loss)
 
 
 def envelope_excess(pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope) -> float:
@@ -79,8 +86,7 @@ def envelope_excess(pb: Problem, g: Grid, p: np.ndarray, env: BrakeEnvelope) -> 
     vz = pb.v0[2] + np.cumsum(gz * g.dt + fl.k * fl.u[:, 2])
     zt = np.maximum(pb.altitudes(fl, g) + env.gate_m, 0.0)
     m_end = pb.m0 - np.cumsum(np.abs(fl.u).sum(axis=1) * g.dt / EXHAUST_VELOCITY_MPS)
-    a_l = np.maximum(env.thrust_margin * env.max_vertical_thrust_n / m_end + gz, 0.0)
-    vmax = np.sqrt(env.land_speed_mps**2 + 2.0 * a_l * zt)
+    vmax, _ = env.limits(zt, m_end)
     return float((-vz - vmax + np.minimum(env.margin_mps, 0.5 * vmax)).max())
 
 
@@ -100,10 +106,8 @@ def _envelope_rows(
     vz = pb.v0[2] + np.cumsum(gz * g.dt + fl.k * fl.u[:, 2])
     z = pb.altitudes(fl, g)
     m_end = pb.m0 - np.cumsum(np.abs(fl.u).sum(axis=1) * g.dt / EXHAUST_VELOCITY_MPS)
-    a_l = np.maximum(env.thrust_margin * env.max_vertical_thrust_n / m_end + gz, 0.0)
     zt = np.maximum(z + env.gate_m, 0.0)
-    vmax = np.sqrt(env.land_speed_mps**2 + 2.0 * a_l * zt)
-    dvmax = np.where(zt > 0.0, a_l / vmax, 0.0)
+    vmax, dvmax = env.limits(zt, m_end)
     sel_t = t_end[sel, None]
     before = np.arange(n_steps)[None, :] <= sel[:, None]
     coef = fl.k[None, :] + dvmax[sel, None] * (fl.h[None, :] + fl.k[None, :] * (sel_t - t_end))

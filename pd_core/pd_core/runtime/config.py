@@ -9,7 +9,9 @@ Four parts, one per component of `pd_core.runtime.layer.Runtime`:
 
 The defaults are what the shipped policy flies; `RuntimeConfig.off()` is the bare network (no
 rule, no prediction, no filter). `to_dict` writes every field; `from_dict` needs every field, so a
-file never takes a behaviour default from code. The evidence behind each default is in
+file never takes a behaviour default from code, except the fields added after a file could have
+been written without them (`ADDED_FIELDS`): a file without one flies the value the code flew
+before the field existed. The evidence behind each default is in
 `docs/experiments/runtime-layer-history.md`.
 """
 
@@ -67,6 +69,9 @@ class RulesConfig:
     """above this observed altitude the fallback flies where its lateral limit binds (0: never)"""
     handover_mass_kg: float = HANDOVER_MASS_KG
     """below this observed mass the fallback flies (0: never)"""
+    brake_mass_loss: bool = False
+    """the braking limit counts on the mass lost while braking (the rocket equation at the
+    margin thrust, `pd_core.envelope`); False: on the mass now, as every file before issue 68"""
 
     def __post_init__(self) -> None:
         _check(0.0 < self.thrust_margin <= 1.0, "thrust_margin", self.thrust_margin, "in (0, 1]")
@@ -115,6 +120,13 @@ class LatencyConfig:
     """(m/s)^2 of commanded vertical velocity change before the window measure is used"""
     jump_m: float = 50.0
     """a row whose position jumps this far from where it was heading starts a new episode"""
+    unmeasured_thrust: float = 1.0
+    """delivered fraction of the vertical thrust the rules count on until the engine has been
+    measured in flight (1: nominal, as every file before issue 68; 0.8: the weakest engine
+    promised); needs `thrust_model`"""
+    measured_gain_sd: float = 0.02
+    """the engine counts as measured once the vertical gain of the lag flown is known to this
+    standard deviation"""
 
     def __post_init__(self) -> None:
         d = self.max_delay_steps
@@ -131,8 +143,16 @@ class LatencyConfig:
             "window_min_evidence",
         ):
             _check(getattr(self, name) >= 0.0, name, getattr(self, name), ">= 0")
-        for name in ("thrust_matrix_prior_sd", "force_noise_n", "window_noise_mps", "jump_m"):
+        for name in (
+            "thrust_matrix_prior_sd",
+            "force_noise_n",
+            "window_noise_mps",
+            "jump_m",
+            "measured_gain_sd",
+        ):
             _check(getattr(self, name) > 0.0, name, getattr(self, name), "> 0")
+        u = self.unmeasured_thrust
+        _check(0.0 < u <= 1.0, "unmeasured_thrust", u, "in (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -228,7 +248,10 @@ class RuntimeConfig:
             "fallback": ZemZevParams,
         }
         _exact_keys(d, [*parts, "network_dtype"], "runtime")
-        built = {name: _build(kind, d[name], name) for name, kind in parts.items()}
+        built = {
+            name: _build(kind, {**ADDED_FIELDS.get(name, {}), **_object(d[name], name)}, name)
+            for name, kind in parts.items()
+        }
         return cls(**built, network_dtype=str(d["network_dtype"]))
 
     def with_settings(self, settings: str) -> RuntimeConfig:
@@ -263,6 +286,14 @@ class RuntimeConfig:
         return replace(self, **{owners[0]: new})
 
 
+ADDED_FIELDS: dict[str, dict[str, Any]] = {
+    "rules": {"brake_mass_loss": False},
+    "latency": {"unmeasured_thrust": 1.0, "measured_gain_sd": 0.02},
+}
+"""fields added after policy files were shipped (issue 68), by part, with the value every file
+written before them flies"""
+
+
 def _field_types(kind: type) -> dict[str, str]:
     return {f.name: str(f.type) for f in fields(kind)}
 
@@ -285,6 +316,12 @@ def _parse(type_name: str, value: Any, name: str) -> Any:
     if type_name == "float":
         return float(value)
     raise ValueError(f"{name}: unsupported field type {type_name}")
+
+
+def _object(d: Any, where: str) -> dict[str, Any]:
+    if not isinstance(d, dict):
+        raise ValueError(f"{where} settings must be an object, got {type(d).__name__}")
+    return d
 
 
 def _exact_keys(d: Any, want: list[str], where: str) -> None:

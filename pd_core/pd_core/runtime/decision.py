@@ -16,6 +16,10 @@ import numpy as np
 NETWORK, BRAKE, GUARD, HANDOVER = 0, 1, 2, 3
 SOURCES = ("network", "brake", "guard", "handover")
 """name of each source, by number"""
+LIMITS = ("none", "descent", "descent-mass-loss", "touchdown")
+"""name of each braking limit (`pd_core.envelope.brake_fires`), by number: none fired; the
+descent speed at the mass now; the descent speed counting on the mass lost while braking; the
+touchdown speed of a step that ends on the ground"""
 
 
 def changed_count(counts: Mapping[str, int]) -> int:
@@ -45,6 +49,9 @@ class Decision:
     """delivered / commanded vertical thrust the braking limit counts on (1: nominal)"""
     nav_filter_engaged: bool
     """the state decided on is the navigation filter's estimate (else the observation)"""
+    brake_limit: str = LIMITS[0]
+    """the braking limit that fired on the command (one of LIMITS; it fires whether or not it
+    changed the action: `source` says who decided)"""
 
     @property
     def changed(self) -> bool:
@@ -63,6 +70,8 @@ class Decisions:
     delay_steps: np.ndarray
     thrust_gain_bound: np.ndarray
     nav_filter_engaged: np.ndarray
+    brake_limit: np.ndarray
+    """(B,) uint8 limit numbers (LIMITS)"""
 
     def __getitem__(self, i: int) -> Decision:
         return Decision(
@@ -72,4 +81,5 @@ class Decisions:
             int(self.delay_steps[i]),
             float(self.thrust_gain_bound[i]),
             bool(self.nav_filter_engaged[i]),
+            LIMITS[int(self.brake_limit[i])],
         )

@@ -18,29 +18,26 @@ process imports numba (0.4 s) and loads the kernels (0.15 s; `pd_core.runtime.la
 the first `Runtime` is built); after an edit of this file the first process compiles them again
 (about 10 s).
 
-Numba imports SciPy (a version check; BLAS for `np.dot` and `np.linalg` in compiled code): that
-would put SciPy on the flight path. Where SciPy is not loaded already, numba is imported here with
-SciPy hidden, so that process's compiled code has no BLAS (no kernel uses it).
+Numba comes from `pd_core.jit` (imported without SciPy on the flight path). The braking law is
+`pd_core.envelope`'s, compiled into `kernels_rules`; numba's cache does not see an edit of it, so
+the cache index of these modules is dropped here where any of their sources is newer
+(`pd_core.jit.drop_stale_cache`).
 """
 
 from __future__ import annotations
 
-import sys
+from pathlib import Path
 
 import numpy as np
 
+from pd_core import envelope
 from pd_core.config import DRY_MASS_KG, DT_S, G0_MPS2, GRAVITY_MPS2, ISP_S
 from pd_core.dynamics import PHI1, PHI2
+from pd_core.jit import drop_stale_cache, njit
 
-if "scipy" in sys.modules:
-    from numba import njit
-else:  # numba imports SciPy to check its version and to look for BLAS: neither is used here
-    sys.modules["scipy"] = None  # type: ignore[assignment]  # "import scipy" fails
-    try:
-        import numba.np.arraymath  # noqa: F401  (its BLAS check, now rather than at a first call)
-        from numba import njit
-    finally:
-        del sys.modules["scipy"]
+_HERE = Path(__file__).resolve().parent
+_KERNELS = sorted(_HERE.glob("kernels*.py"))
+drop_stale_cache(_KERNELS, [*_KERNELS, Path(envelope.__file__)])
 
 
 def consts() -> np.ndarray:

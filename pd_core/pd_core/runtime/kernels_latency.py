@@ -85,9 +85,12 @@ def thrust_scale_rows(
     n_sd: float,
     min_evidence: float,
     noise2: float,
+    unmeasured: float,
+    measured_sd: float,
 ) -> np.ndarray:
     """(B,) vertical thrust scale of rows (B,): the lag's vertical gain + n_sd sd, or the
-    window bound where lower (`LatencyCompensator.vertical_thrust_scale`)."""
+    window bound where lower, at most `unmeasured` while that sd is not below `measured_sd`
+    (`LatencyCompensator.vertical_thrust_scale`)."""
     out = np.empty(len(rows))
     for b in range(len(rows)):
         r = rows[b]
@@ -96,6 +99,8 @@ def thrust_scale_rows(
         per_step = gain[r, lag, 2, 2] + n_sd * sd
         w = win_sums[r]
         out[b] = min(per_step, window_bound(w[0], w[1], w[2], w[3], n_sd, min_evidence, noise2))
+        if unmeasured < 1.0 and not sd < measured_sd:
+            out[b] = min(out[b], unmeasured)
     return out
 
 

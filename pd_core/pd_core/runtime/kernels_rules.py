@@ -1,34 +1,42 @@
 """Compiled rules (`pd_core.runtime.rules`): braking limit, touchdown guard, handover; one loop
-over the rows given; see `pd_core.runtime.kernels` for the conventions."""
+over the rows given; see `pd_core.runtime.kernels` for the conventions. The braking law is
+`pd_core.envelope`'s (`brake_fires`, `max_descent_speed_for`), compiled in."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from pd_core.runtime.decision import BRAKE, GUARD, HANDOVER, NETWORK
+from pd_core import envelope
+from pd_core.runtime.decision import BRAKE, GUARD, HANDOVER, LIMITS, NETWORK
 from pd_core.runtime.kernels import njit
 
 # the sources `rules_rows` writes, as numbered in pd_core.runtime.decision
 if (NETWORK, BRAKE, GUARD, HANDOVER) != (0, 1, 2, 3):
     raise ImportError("pd_core.runtime.kernels: rules_rows numbers the sources 0, 1, 2, 3")
+_LIMITS = (envelope.NO_LIMIT, envelope.DESCENT, envelope.DESCENT_MASS_LOSS, envelope.TOUCHDOWN)
+if _LIMITS != tuple(range(len(LIMITS))):
+    raise ImportError("pd_core.runtime.decision.LIMITS must number pd_core.envelope's limits")
 
 
 # ---- rules --------------------------------------------------------------------------------------
 # rule parameters (float array, `pd_core.runtime.rules.rule_settings`): [enabled, thrust_margin,
 # land_speed, touchdown_speed, measured_thrust, min_measured_thrust, guard_altitude, guard_climb,
 # handover_altitude, handover_mass, fallback brake_accel, fallback brake_margin, fallback
-# land_speed, fallback min_brake_accel, raised vertical thrust N, g (m/s^2, > 0), dt s]
+# land_speed, fallback min_brake_accel, raised vertical thrust N, g (m/s^2, > 0), dt s,
+# brake_mass_loss]
 _R_ON, _R_MARGIN, _R_LAND, _R_TOUCH, _R_MEAS, _R_MINMEAS, _R_GALT, _R_GCLIMB = range(8)
 _R_HALT, _R_HMASS, _R_FBRAKE, _R_FMARGIN, _R_FLAND, _R_FMINBRAKE, _R_RAISED, _R_G, _R_DT = range(
     8, 17
 )
+_R_MASSLOSS = 17
 
 
 @njit(cache=True)
 def max_descent_speed(z: float, mass: float, max_thrust_z: float, rp: np.ndarray) -> float:
     """`pd_core.runtime.rules.max_descent_speed_mps` of one lander."""
-    a_net = rp[_R_MARGIN] * max_thrust_z / mass - rp[_R_G]
-    return np.sqrt(rp[_R_LAND] ** 2 + 2.0 * max(a_net, 0.0) * max(z, 0.0))
+    return envelope.max_descent_speed_for(
+        z, mass, rp[_R_MARGIN] * max_thrust_z, rp[_R_LAND], rp[_R_G], rp[_R_MASSLOSS] > 0.0
+    )
 
 
 @njit(cache=True)
@@ -42,16 +50,20 @@ def max_descent_speeds(
 
 
 @njit(cache=True)
+def brake_limit_row(s: np.ndarray, thrust_z: float, max_thrust_z: float, rp: np.ndarray) -> int:
+    """The braking limit a vertical command thrust_z (N, delivered) fires from state s (7,)
+    (`pd_core.envelope.brake_fires` at the margin; NO_LIMIT where none)."""
+    m = rp[_R_MARGIN]
+    return envelope.brake_fires(
+        s[2], s[5], s[6], m * thrust_z, m * max_thrust_z, rp[_R_LAND], rp[_R_TOUCH], rp[_R_G],
+        rp[_R_DT], rp[_R_MASSLOSS] > 0.0,
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def brake_row(s: np.ndarray, thrust_z: float, max_thrust_z: float, rp: np.ndarray) -> bool:
     """`pd_core.runtime.rules.brake_mask` of one state (7,)."""
-    dt = rp[_R_DT]
-    a_z = rp[_R_MARGIN] * thrust_z / s[6] - rp[_R_G]
-    vz = s[5] + a_z * dt
-    z = s[2] + (s[5] + 0.5 * a_z * dt) * dt
-    over = -vz > max_descent_speed(z, s[6], max_thrust_z, rp)
-    if rp[_R_TOUCH] <= 0.0 or z > 0.0:
-        return over
-    return s[5] ** 2 - 2.0 * a_z * max(s[2], 0.0) > rp[_R_TOUCH] ** 2
+    return brake_limit_row(s, thrust_z, max_thrust_z, rp) != 0
 
 
 @njit(cache=True)
@@ -108,10 +120,12 @@ def rules_rows(
     rp: np.ndarray,
     source: np.ndarray,
     frac: np.ndarray,
+    limit: np.ndarray,
 ) -> None:
     """`pd_core.runtime.rules.apply_rules` after the handover, in place: `actions` (B,) are the
     proposed ones with the fallback's where `hand`; writes the actions flown into `actions`,
-    their source into `source` (B,) and the delivered fraction counted on into `frac` (B,)."""
+    their source into `source` (B,), the delivered fraction counted on into `frac` (B,) and the
+    braking limit that fired (NO_LIMIT where none, or where the rules are off) into `limit`."""
     top = n_per_axis[2] - 1
     for b in range(len(actions)):
         f = 1.0
@@ -120,12 +134,14 @@ def rules_rows(
         frac[b] = f
         a = actions[b]
         src = 0  # NETWORK
+        lim = 0  # NO_LIMIT
         if hand[b] and a != proposed[b]:
             src = 3  # HANDOVER
         if rp[_R_ON] > 0.0:
             s = states[b]
             lz = level_table[a, 2]
-            fire = brake_row(s, f * table_n[a, 2], f * hi[2], rp)
+            lim = brake_limit_row(s, f * table_n[a, 2], f * hi[2], rp)
+            fire = lim != 0
             guard = not fire and guard_row(s, lz, rp[_R_RAISED], rp)
             if fire or guard:
                 if fire:
@@ -140,3 +156,4 @@ def rules_rows(
                     src = 0
         actions[b] = a
         source[b] = src
+        limit[b] = lim

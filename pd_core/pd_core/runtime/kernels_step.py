@@ -33,6 +33,8 @@ def before_actor(
     n_sd: float,
     min_evidence: float,
     noise2: float,
+    unmeasured: float,
+    measured_sd: float,
     issued: np.ndarray,
     last: np.ndarray,
     score: np.ndarray,
@@ -75,7 +77,9 @@ def before_actor(
     ):  # fmt: skip
         return JUMPED
     if want_scale:
-        scale[:] = thrust_scale_rows(rows, delay, gain, cov, win_sums, n_sd, min_evidence, noise2)
+        scale[:] = thrust_scale_rows(
+            rows, delay, gain, cov, win_sums, n_sd, min_evidence, noise2, unmeasured, measured_sd
+        )
     else:
         scale[:] = 1.0
     return VALID
@@ -92,6 +96,7 @@ def after_actor(
     hand: np.ndarray,
     source: np.ndarray,
     frac: np.ndarray,
+    limit: np.ndarray,
     level_table: np.ndarray,
     table_n: np.ndarray,
     n_per_axis: np.ndarray,
@@ -112,7 +117,7 @@ def after_actor(
     Unless handed_over: actions = proposed and hand (B,) = `handover_row` (rules on); if any
     row is handed over, returns False there (the caller puts the fallback's actions into
     `actions` where `hand` and calls again with handed_over). Then `rules_rows` (actions,
-    source, frac in place) and, with memory, the commands flown enter the pipeline (`issued`)
+    source, frac, limit in place) and, with memory, the commands flown enter the pipeline (`issued`)
     and each row's identified delay and navigation-filter state go to delay, nav (B,)."""
     n = len(proposed)
     if not handed_over:
@@ -125,7 +130,7 @@ def after_actor(
             return False
     rules_rows(
         actions, proposed, hand, states, scale, has_scale, level_table, table_n, n_per_axis, hi,
-        rp, source, frac,
+        rp, source, frac, limit,
     )  # fmt: skip
     if has_memory:
         thrust = np.empty((n, 3))

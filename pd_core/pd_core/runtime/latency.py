@@ -15,7 +15,9 @@ lag's own residuals. The prediction through the pipeline uses the chosen lag's m
 count on the vertical entry of that matrix where it shows the engine short
 (`vertical_thrust_scale`: the estimate plus `shortfall_sd` standard deviations, and the lower of
 that and the same gain measured over windows of `window_steps`, where navigation noise enters
-once per window instead of every step).
+once per window instead of every step). Until the engine has been measured (the gain's standard
+deviation below `measured_gain_sd`), the rules may count on no more than `unmeasured_thrust`
+(1 by default: nominal; 0.8 counts on the weakest engine promised, issue 68).
 
 Where the navigation is noisy the prediction starts from the navigation filter's estimate
 (`pd_core.runtime.navfilter`, fed with the command this lag and matrix say the plant flew).
@@ -92,6 +94,11 @@ def _window_settings(cfg: LatencyConfig) -> tuple[float, float]:
     return float(cfg.window_min_evidence), 2.0 * cfg.window_noise_mps**2
 
 
+def _unmeasured_settings(cfg: LatencyConfig) -> tuple[float, float]:
+    """(unmeasured thrust fraction, measured gain sd), as `thrust_scale_rows` takes them."""
+    return float(cfg.unmeasured_thrust), float(cfg.measured_gain_sd)
+
+
 class LatencyCompensator(RowMemory):
     """Per-row memory of the commands issued and the lag scores; see the module docstring."""
 
@@ -114,6 +121,7 @@ class LatencyCompensator(RowMemory):
         )  # fmt: skip
         """the kernels' settings (`pd_core.runtime.kernels`, latency parameters)"""
         self._window = _window_settings(cfg)
+        self._unmeasured = _unmeasured_settings(cfg)
         nav_off = NavFilter(nav, 0)
         self._no_nav = nav_off.state()
         """the navigation memory the kernels are given where there is no filter (no rows)"""
@@ -200,7 +208,7 @@ class LatencyCompensator(RowMemory):
         while True:
             code = before_actor(
                 obs, STATE_LIMITS, rows, out, jumped, scale, want_scale, self.cfg.shortfall_sd,
-                *self._window, *self._kernel_memory(),
+                *self._window, *self._unmeasured, *self._kernel_memory(),
             )  # fmt: skip
             if code == INVALID:
                 check_state(observed)
@@ -220,7 +228,8 @@ class LatencyCompensator(RowMemory):
         shows it short: their lag's identified vertical gain (the thrust error and the
         misalignment's cosine together) plus `n_sd` of its standard deviation, so an engine
         that delivers what it should reads >= 1 (1 where nothing is identified), or the window
-        bound (`window_gain_bound`) where lower."""
+        bound (`window_gain_bound`) where lower; at most `unmeasured_thrust` until that gain's
+        standard deviation is below `measured_gain_sd` (the engine not yet measured)."""
         rows = np.asarray(rows, dtype=np.int64)
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
         if self.max_delay_steps == 0 or not self.thrust_model:
@@ -228,7 +237,7 @@ class LatencyCompensator(RowMemory):
         n_sd = self.cfg.shortfall_sd if n_sd is None else n_sd
         return thrust_scale_rows(
             rows, self.delay_steps, self.gain, self._cov, self._win_sums, float(n_sd),
-            *self._window,
+            *self._window, *self._unmeasured,
         )  # fmt: skip
 
     def _vertical_gain(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -76,6 +76,7 @@ def rules_and_record(
     hand = np.empty(n, dtype=bool)
     source = np.empty(n, dtype=np.uint8)
     frac = np.empty(n)
+    limit = np.empty(n, dtype=np.uint8)
     delay = np.empty(n, dtype=np.int64)
     nav = np.empty(n, dtype=bool)
     has_memory = memory is not None
@@ -84,10 +85,10 @@ def rules_and_record(
     rules = (s.level_table, s.table_n, s.n_per_axis, s.hi, s.params)
     tail = (*rules, has_memory, rows, *pipeline, delay, nav)
     head = (proposed, decided, scale, has_memory)
-    if not after_actor(*head, False, actions, hand, source, frac, *tail):
+    if not after_actor(*head, False, actions, hand, source, frac, limit, *tail):
         actions[hand] = fallback.act_batch(decided[hand])
-        after_actor(*head, True, actions, hand, source, frac, *tail)
-    return actions, Decisions(actions, proposed, source, delay, frac, nav)
+        after_actor(*head, True, actions, hand, source, frac, limit, *tail)
+    return actions, Decisions(actions, proposed, source, delay, frac, nav, limit)
 
 
 _WARM = False

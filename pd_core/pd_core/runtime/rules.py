@@ -9,13 +9,15 @@ On the state decided on (physical [x, y, z, vx, vy, vz, m], SI), in this order:
    learnt).
 2. **Brake** (`brake_mask`): full vertical thrust where one step of the commanded vertical thrust
    (counted at `thrust_margin` of what the engine delivers) would leave the lander descending
-   faster than the braking limit
+   faster than the braking limit of `pd_core.envelope` for the force margin * f * T_z,max,
 
-       v_max(z, m) = sqrt(v_land^2 + 2 z (margin * f * T_z,max / m - g)),
+       v_max(z, m) = sqrt(v_land^2 + 2 z (margin * f * T_z,max / m - g))
 
-   f being the delivered fraction of vertical thrust measured in flight where it is short
-   (`pd_core.runtime.latency`). A step that ends on the ground is judged by its touchdown speed
-   (`touchdown_speed_mps`) instead.
+   at the mass now, or, with `brake_mass_loss`, counting on the mass lost while braking (the
+   rocket equation at that force); f is the delivered fraction of vertical thrust measured in
+   flight where it is short (`pd_core.runtime.latency`; until the engine is measured, the
+   fraction `LatencyConfig.unmeasured_thrust`). A step that ends on the ground is judged by its
+   touchdown speed (`touchdown_speed_mps`) instead. The decision records which limit fired.
 3. **Guard** (`guard_mask`): below `guard_altitude_m` a descending lander may not free-fall: a
    zero vertical command is raised one level (where that level would climb faster than
    `guard_climb_mps2`, only a descent faster than the land speed counts).
@@ -45,7 +47,7 @@ class RuleSettings(NamedTuple):
     `rule_settings`)."""
 
     params: np.ndarray
-    """(17,) floats: see `pd_core.runtime.kernels`, rule parameters"""
+    """(18,) floats: see `pd_core.runtime.kernels_rules`, rule parameters"""
     level_table: np.ndarray
     """(n, 3) int64 levels of each action"""
     table_n: np.ndarray
@@ -69,6 +71,7 @@ def rule_settings(
             p.measured_thrust, p.min_measured_thrust, p.guard_altitude_m, p.guard_climb_mps2,
             p.handover_altitude_m, p.handover_mass_kg, f.brake_accel_mps2, f.brake_margin,
             f.land_speed_mps, f.min_brake_accel_mps2, raised, float(-GRAVITY_MPS2[2]), DT_S,
+            p.brake_mass_loss,
         ],
         dtype=float,
     )  # fmt: skip
@@ -92,7 +95,8 @@ def max_descent_speed_mps(
     p: RulesConfig,
 ) -> np.ndarray:
     """Fastest descent speed (m/s, >= 0) from which the margin thrust still brakes to the land
-    speed by the pad; the land speed itself where the lander cannot brake at all."""
+    speed by the pad (with the mass lost while braking where `p.brake_mass_loss`); the land
+    speed itself where the lander cannot brake at all."""
     args = (np.asarray(v, dtype=float) for v in (altitude_m, mass_kg, max_vertical_thrust_n))
     z, m, t = np.broadcast_arrays(*args)
     rp = rule_settings(p, _ANY_SPACE).params
@@ -151,11 +155,12 @@ def decide(
     states: np.ndarray,
     fallback: ZemZevController,
     vertical_thrust_scale: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`apply_rules` with its settings built (`rule_settings`), and the delivered fraction of
-    the commanded vertical thrust the braking limit counted on (n,): the measured
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`apply_rules` with its settings built (`rule_settings`), the delivered fraction of the
+    commanded vertical thrust the braking limit counted on (n,): the measured
     `vertical_thrust_scale` (n,) where below 1 and `measured_thrust`, floored at
-    `min_measured_thrust`; else 1 (a measured surplus is never counted on)."""
+    `min_measured_thrust`; else 1 (a measured surplus is never counted on); and the braking
+    limit that fired (n,) uint8 (`pd_core.runtime.decision.LIMITS`)."""
     a = np.array(proposed, dtype=np.int64).reshape(-1)
     s = _states(states)
     rp = settings.params
@@ -165,14 +170,15 @@ def decide(
         a[hand] = fallback.act_batch(s[hand])
     source = np.empty(n, dtype=np.uint8)
     frac = np.empty(n)
+    limit = np.empty(n, dtype=np.uint8)
     has_scale = vertical_thrust_scale is not None
     scale = np.ascontiguousarray(vertical_thrust_scale, dtype=float) if has_scale else frac
     kernels.rules_rows(
         a, np.asarray(proposed, dtype=np.int64).reshape(-1), hand, s, scale, has_scale,
         settings.level_table, settings.table_n, settings.n_per_axis, settings.hi, rp, source,
-        frac,
+        frac, limit,
     )  # fmt: skip
-    return a, source, frac
+    return a, source, frac, limit
 
 
 def apply_rules(

@@ -60,7 +60,7 @@ from typing import Protocol
 
 import numpy as np
 
-from pd_core import ocp
+from pd_core import envelope, ocp
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.config import (
     BRAKE_MARGIN,
@@ -442,20 +442,19 @@ def brake_limited(
     margin: float = BRAKE_MARGIN,
     land_speed_mps: float = LAND_SPEED_MPS,
     touchdown_speed_mps: float = TOUCHDOWN_SPEED_MPS,
+    mass_loss: bool = False,
 ) -> bool:
     """True where the runtime layer's braking limit would fire on a vertical command (N) from
-    state s (7,): the formula of `pd_core.runtime.rules.brake_mask` (one step of the command
-    counted at `margin`, against v_max(z, m) = sqrt(v_land^2 + 2 z (margin T_max / m - g)), a
-    step ending on the ground judged by its touchdown speed), repeated here so that the teacher
-    does not import the runtime package (tests/unit/test_mpc_reserve.py checks they agree)."""
-    g = -float(GRAVITY_MPS2[2])
-    a_z = margin * vertical_thrust_n / s[6] - g
-    vz = s[5] + a_z * DT_S
-    z = s[2] + (s[5] + 0.5 * a_z * DT_S) * DT_S
-    a_max = max(margin * max_vertical_thrust_n / s[6] - g, 0.0)
-    if touchdown_speed_mps > 0.0 and z <= 0.0:
-        return bool(s[5] ** 2 - 2.0 * a_z * max(s[2], 0.0) > touchdown_speed_mps**2)
-    return bool(-vz > math.sqrt(land_speed_mps**2 + 2.0 * a_max * max(z, 0.0)))
+    state s (7,): `pd_core.envelope.brake_fires` (one step of the command counted at `margin`,
+    against the limit of margin x max_vertical_thrust_n, at the mass now or, with mass_loss,
+    counting on the mass lost while braking), the law the layer compiles
+    (tests/unit/test_mpc_reserve.py checks they agree)."""
+    fired = envelope.brake_fires(
+        float(s[2]), float(s[5]), float(s[6]), margin * vertical_thrust_n,
+        margin * max_vertical_thrust_n, land_speed_mps, touchdown_speed_mps,
+        -float(GRAVITY_MPS2[2]), DT_S, mass_loss,
+    )  # fmt: skip
+    return fired != envelope.NO_LIMIT
 
 
 def time_to_rest_s(s: np.ndarray, gate_altitude_m: float) -> float:
