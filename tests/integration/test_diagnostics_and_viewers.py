@@ -51,7 +51,7 @@ def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node
     probe.create_subscription(LanderState, "/lander/state", states.append, qos.LOOP_SUB_QOS)
     probe.create_subscription(EpisodeResult, "/lander/episode", results.append, qos.EPISODE_QOS)
     try:
-        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        sim = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False})
         policy = procs.node("pd_policy_node", {})
         procs.node("pd_ocp_node", {})
         rec = procs.start("pd_record", [executable("pd_bringup", "pd_record"), "-o", str(bag)])
@@ -164,7 +164,7 @@ def test_lockstep_clock_runs_on_across_episodes(tmp_path, make_node, spin_until)
     try:
         sim = procs.node(
             "pd_sim_node",
-            {"lockstep": True, "autostart": False, "auto_restart": True, "max_time_s": 6.0},
+            {"lockstep": True, "start_episode": False, "auto_restart": True, "max_time_s": 6.0},
         )
         policy = procs.node("pd_policy_node", {})
         assert sim.wait_log("simulator ready", START_S), procs.logs()

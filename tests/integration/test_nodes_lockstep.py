@@ -40,7 +40,7 @@ def stack(tmp_path_factory):
     model = make_model(tmp / "untrained.pt", seed=1)
     procs = ProcessSet(tmp)
     try:
-        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        sim = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False})
         policy = procs.node("pd_policy_node", {"model_path": str(model)})
         assert sim.wait_log("simulator ready", START_S), procs.logs()
         assert policy.wait_log("policy ready", START_S), procs.logs()

@@ -29,7 +29,7 @@ MPC_STEPS = 10  # an MPC teacher re-plans every step: fly this many, not a whole
 def sim(tmp_path_factory):
     procs = ProcessSet(tmp_path_factory.mktemp("controllers"))
     try:
-        node = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        node = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False})
         assert node.wait_log("simulator ready", START_S), procs.logs()
         yield procs
     finally:

@@ -50,7 +50,7 @@ def stack(tmp_path_factory):
         sim = procs.node(
             "pd_sim_node",
             # every rejection logged with its running count (the burst test reads them)
-            {"lockstep": True, "auto_restart": True, "autostart": False, "seed": 3,
+            {"lockstep": True, "auto_restart": True, "start_episode": False, "seed": 3,
              "log_rejections": 100000},
         )  # fmt: skip
         policy = procs.node("pd_policy_node", {"controller": "zemzev"})
