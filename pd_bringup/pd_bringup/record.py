@@ -21,10 +21,11 @@ resolve in the recorder's namespace; topics of unknown type are looked up in the
 stop during that wait records the topics whose type is known). ROS arguments (`--ros-args ...`)
 may come anywhere on the command line.
 
-By default it records the lander/* topics, the viewer topics (lander/odom, lander/path, ocp/plan)
-and /diagnostics (not /clock: `ros2 bag play --clock` makes one). It publishes its own
-/diagnostics at 1 Hz: messages per topic, gaps (never arrived), DDS losses, messages queued and
-not written; ERROR once anything was lost (pd_ros_common.diagnostics).
+By default it records the lander/* topics, the viewer topics (lander/odom, lander/path,
+ocp/plan), /diagnostics and the managed nodes' `<node>/transition_event`
+(lifecycle_msgs/TransitionEvent), not /clock (`ros2 bag play --clock` makes one). It publishes
+its own /diagnostics at 1 Hz: messages per topic, gaps (never arrived), DDS losses, messages
+queued and not written; ERROR once anything was lost (pd_ros_common.diagnostics).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import TransitionEvent
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -67,6 +69,7 @@ KNOWN_TYPES: dict[str, type] = {
     names.PLAN_TOPIC: PathMsg,
     names.DIAGNOSTICS_TOPIC: DiagnosticArray,
     names.CLOCK_TOPIC: Clock,
+    **{t: TransitionEvent for t in names.TRANSITION_TOPICS},
 }
 KNOWN_QOS = {  # fallback when no publisher is seen
     names.EPISODE_TOPIC: qos.EPISODE_QOS,
@@ -102,8 +105,9 @@ class Recorder(Node):
             t in self.known_qos and qos.keeps_latest_only(self.known_qos[t]) for t in self.topics
         ]
         self.lost_events = 0
+        self.subscriptions_by_topic = {}
         for i, topic in enumerate(self.topics):
-            self.create_subscription(
+            self.subscriptions_by_topic[topic] = self.create_subscription(
                 self.types[topic],
                 topic,
                 self._queuer(sink, i),
@@ -184,6 +188,12 @@ class Recorder(Node):
             "superseded (latest-value topics)": sum(w.superseded),
             "lost (DDS events)": self.lost_events,
             "queued": w.sink.qsize(),
+            # publishers each subscription has matched (DDS): a tool waits for these before
+            # the first message it needs recorded (pd_demo: the nodes' transition events)
+            **{
+                f"writers {t}": s.get_publisher_count()
+                for t, s in self.subscriptions_by_topic.items()
+            },
         }
         r.rule(diagnostics.ERROR, lost > 0, f"{lost} message(s) lost since the start")
         return r
