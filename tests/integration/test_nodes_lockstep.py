@@ -155,8 +155,11 @@ def test_lockstep_landing_equals_offline_rollout(stack, make_node, spin_until):
     def cmds():
         return [c for c in loop.commands if c.episode == episode]
 
-    spin_until(lambda: len(cmds()) >= result.steps, 5.0)
-    assert sorted(c.step for c in cmds()) == list(range(result.steps))
+    def every_step_commanded() -> bool:
+        return sorted(c.step for c in cmds()) == list(range(result.steps))
+
+    spin_until(every_step_commanded, 5.0)
+    assert every_step_commanded(), sorted(c.step for c in cmds())
 
 
 def test_bad_inputs_rejected_and_loop_goes_on(stack, make_node, spin_until):
