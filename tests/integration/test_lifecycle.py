@@ -16,12 +16,14 @@ The policy flies the ZEM/ZEV reference controller (no torch: a quick start-up).
 from __future__ import annotations
 
 import signal
+import subprocess
 
 import pytest
 from helpers import ProcessSet, executable
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetAvailableTransitions, GetState
 
+from pd_core import lifecycle as lc
 from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
 from pd_ros_common import diagnostics, qos
@@ -324,4 +326,37 @@ def test_the_old_episode_autostart_false_is_a_deprecated_alias(
         procs.stop_all()
 
 
-assert State.PRIMARY_STATE_ACTIVE == 3  # the ids the manager's pd_core.lifecycle assumes
+def test_help_lists_the_lifecycle_parameters_and_the_managers_options():
+    for package, words in [
+        ("pd_sim_node", ["autostart (bool, default True)", "start_episode (bool, default True)"]),
+        ("pd_policy_node", ["autostart (bool, default True)"]),
+        ("pd_ocp_node", ["autostart (bool, default True)"]),
+    ]:
+        out = subprocess.run(
+            [executable(package, package), "--help"], capture_output=True, text=True, timeout=60
+        )
+        assert out.returncode == 0 and all(w in out.stdout for w in words), out.stdout
+    out = subprocess.run(
+        [executable("pd_bringup", "pd_lifecycle_manager"), "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "--nodes" in out.stdout and "--heartbeat-timeout" in out.stdout
+
+
+def test_the_state_ids_are_lifecycle_msgs_ones():
+    assert (lc.UNCONFIGURED, lc.INACTIVE, lc.ACTIVE, lc.FINALIZED) == (
+        State.PRIMARY_STATE_UNCONFIGURED,
+        State.PRIMARY_STATE_INACTIVE,
+        State.PRIMARY_STATE_ACTIVE,
+        State.PRIMARY_STATE_FINALIZED,
+    )
+    assert (lc.CONFIGURE, lc.ACTIVATE, lc.DEACTIVATE, lc.CLEANUP, lc.ACTIVE_SHUTDOWN) == (
+        T.TRANSITION_CONFIGURE,
+        T.TRANSITION_ACTIVATE,
+        T.TRANSITION_DEACTIVATE,
+        T.TRANSITION_CLEANUP,
+        T.TRANSITION_ACTIVE_SHUTDOWN,
+    )
