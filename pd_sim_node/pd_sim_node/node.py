@@ -362,7 +362,10 @@ class SimNode(ManagedNode):
                 self._unpublished = False
                 self._publish_state()
             if s.flying and self._waiting_since is not None:
-                self._waiting_since = time.monotonic()
+                if s.has_fresh_command:  # the first command came while the node was inactive
+                    self._start_ticker()
+                else:
+                    self._waiting_since = time.monotonic()
             elif self._resume_ticker:
                 self._start_ticker()
             elif self.lockstep and s.flying and s.has_fresh_command:
