@@ -18,6 +18,12 @@ The first valid command for a step is flown; later ones for the same step are re
 and logged like every invalid command. Every parameter is read at start-up (read-only
 afterwards); defaults are in pd_bringup/config/sim.yaml.
 
+A managed (lifecycle) node: configure makes the simulator and, with `start_episode`, its first
+episode; activate publishes its state and starts flying; deactivate holds the episode at its step
+(no state, no step; commands that arrive are kept) and activate goes on from that step, so
+nothing is lost or flown twice; sim/reset is refused unless active; cleanup drops the simulator.
+`autostart` (default true) configures and activates it at start-up.
+
 Identity: each run has a `lander_id` (the parameter, or a random one at start-up), carried by
 every lander/state and echoed by the command answering it. A command for another lander (a
 second stack on the same names, without a namespace) is counted as foreign, never flown, and the
