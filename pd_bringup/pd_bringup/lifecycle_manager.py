@@ -9,10 +9,11 @@ stack down when one fails or on Ctrl-C (as nav2's lifecycle_manager does).
    activates them in the same order (a node already there is left as it is), printing one line
    per transition: `pd_ocp_node: configure: unconfigured -> inactive (0.42 s)`.
 2. It watches the active nodes: each must publish its /diagnostics heartbeat (1 Hz) within
-   `--heartbeat-timeout` and answer `get_state` with `active`. When one fails (it died, hangs,
-   or went to another state), it deactivates the others, in reverse order, and says why in one
-   line: `pd_sim_node failed (no /diagnostics heartbeat for 5.2 s); deactivated pd_policy_node,
-   pd_ocp_node`. It then keeps running, the stack down, until stopped.
+   `--heartbeat-timeout` and answer `get_state` with `active` (two unanswered in a row, 3 s
+   each, count as gone). When one fails (it died, hangs, or went to another state), it
+   deactivates the others, in reverse order, and says why in one line: `pd_sim_node failed (no
+   /diagnostics heartbeat for 5.2 s); deactivated pd_policy_node, pd_ocp_node`. It then keeps
+   running, the stack down, until stopped.
 3. Ctrl-C or SIGTERM: deactivate, cleanup and shutdown, each in reverse order, then exit: status
    0, or 1 if a node failed or did not come up (2 for a bad command line).
 
@@ -43,7 +44,8 @@ from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.lifecycle import TRANSITION_EVENT, LifecycleClient
 
 WATCH_PERIOD_S = 1.0  # get_state of every active node this often
-STATE_TIMEOUT_S = 3.0  # a get_state unanswered this long: the node counts as gone
+STATE_TIMEOUT_S = 3.0  # a get_state unanswered this long is a miss
+STATE_MISSES = 2  # this many misses in a row: the node counts as gone (a busy machine drops one)
 SpinUntil = Callable[[Callable[[], bool], float], bool]
 
 
@@ -59,6 +61,7 @@ class LifecycleManager:
         say: Callable[[str], None] = print,
         heartbeat_timeout_s: float = 5.0,
         transition_timeout_s: float = 120.0,
+        interrupted: Callable[[], bool] = lambda: False,
     ) -> None:
         self.node = node
         self._spin_until = spin_until
@@ -71,6 +74,8 @@ class LifecycleManager:
         self._prefix = {node.resolve_topic_name(n).lstrip("/") + ": ": n for n in self.nodes}
         self.events: dict[str, list[TransitionEvent]] = {n: [] for n in self.nodes}
         self.failure: str | None = None  # the line said when a node failed
+        self.interrupted = interrupted  # a stop was asked: a wait cut short is no failure
+        self._misses = {n: 0 for n in self.nodes}
         self._next_watch = 0.0
         node.create_subscription(
             DiagnosticArray, names.DIAGNOSTICS_TOPIC, self._on_diagnostics, qos.DIAGNOSTICS_QOS
@@ -107,6 +112,9 @@ class LifecycleManager:
         t0 = time.monotonic()
         future = self.clients[name].request_change(transition)
         if not self._spin_until(future.done, self.transition_timeout_s):
+            if self.interrupted():
+                self.say(f"{name}: {label}: interrupted")
+                return False
             self.say(f"{name}: {label}: unanswered within {self.transition_timeout_s:g} s")
             self.states[name] = lc.UNKNOWN
             return False
@@ -148,7 +156,8 @@ class LifecycleManager:
                 continue
             why = self._go(n, goal)
             if why is not None:
-                self.fail(n, why)
+                if not self.interrupted():
+                    self.fail(n, why)
                 return False
         return True
 
@@ -164,8 +173,9 @@ class LifecycleManager:
         return self.failure
 
     def watch(self) -> str | None:
-        """Check the active nodes (at most once per WATCH_PERIOD_S): a stale heartbeat or a
-        state other than active takes the stack down. The failure line, or None."""
+        """Check the active nodes (at most once per WATCH_PERIOD_S): a stale heartbeat, a
+        state other than active or STATE_MISSES get_state unanswered in a row take the stack
+        down. The failure line, or None (also when a stop cut the check short)."""
         now = time.monotonic()
         if self.failure is not None or now < self._next_watch:
             return None
@@ -175,10 +185,17 @@ class LifecycleManager:
         watched = [n for n in self.nodes if self.states[n] == lc.ACTIVE]
         futures = {n: self.clients[n].request_state() for n in watched}
         self._spin_until(lambda: all(f.done() for f in futures.values()), STATE_TIMEOUT_S)
+        if self.interrupted():
+            return None
         for n, f in futures.items():
             if not f.done() or f.result() is None:
+                self._misses[n] += 1
+                if self._misses[n] < STATE_MISSES:
+                    continue
                 self.states[n] = lc.UNKNOWN
-                return self.fail(n, f"get_state unanswered for {STATE_TIMEOUT_S:g} s")
+                waited = STATE_MISSES * STATE_TIMEOUT_S
+                return self.fail(n, f"get_state unanswered {STATE_MISSES} times ({waited:g} s)")
+            self._misses[n] = 0
             state = int(f.result().current_state.id)
             if state != lc.ACTIVE:
                 self.states[n] = state
@@ -267,7 +284,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pd_lifecycle_manager: {line}", flush=True)
 
     manager = LifecycleManager(
-        node, spin_until, args.nodes, say, args.heartbeat_timeout, args.transition_timeout
+        node,
+        spin_until,
+        args.nodes,
+        say,
+        args.heartbeat_timeout,
+        args.transition_timeout,
+        interrupted=interrupted,
     )
     status = 0
     try:
