@@ -245,8 +245,7 @@ def test_deactivate_and_activate_in_mid_flight_lose_no_step(
 
 def _manager(procs: ProcessSet, *args: str):
     return procs.start(
-        "pd_lifecycle_manager",
-        [executable("pd_bringup", "pd_lifecycle_manager"), "--heartbeat-timeout", "3", *args],
+        "pd_lifecycle_manager", [executable("pd_bringup", "pd_lifecycle_manager"), *args]
     )
 
 
@@ -291,7 +290,7 @@ def test_the_manager_takes_the_stack_down_when_a_node_is_killed(
         sim = procs.node("pd_sim_node", {**SIM, "auto_restart": True})
         procs.node("pd_policy_node", POLICY)
         procs.node("pd_ocp_node", {"autostart": False})
-        manager = _manager(procs)
+        manager = _manager(procs, "--heartbeat-timeout", "4")
         assert manager.wait_log("; watching", START_S), procs.logs()
         probe = Probe(make_node, spin_until, service_ready, ["pd_ocp_node", "pd_policy_node"])
         sim.signal_group(signal.SIGKILL)
