@@ -91,7 +91,9 @@ def run(args: argparse.Namespace, out: Path, domain: int) -> int:
     probe = Probe(node)
     rss: dict[str, list[tuple[float, float]]] = {}
     try:
-        sim = sup.node("pd_sim_node", {"lockstep": True, "auto_restart": True, "autostart": False})
+        sim = sup.node(
+            "pd_sim_node", {"lockstep": True, "auto_restart": True, "start_episode": False}
+        )
         pol = sup.node("pd_policy_node", {"controller": args.controller, "stats_period_s": 60.0})
         rec = None
         if not args.no_record:

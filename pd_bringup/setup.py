@@ -27,6 +27,7 @@ setup(
             "pd_demo = pd_bringup.demo:main",
             "pd_record = pd_bringup.record:main",
             "pd_replay = pd_bringup.replay:main",
+            "pd_lifecycle_manager = pd_bringup.lifecycle_manager:main",
         ],
     },
 )

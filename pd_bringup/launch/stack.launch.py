@@ -3,6 +3,7 @@
     ros2 launch pd_bringup stack.launch.py
     ros2 launch pd_bringup stack.launch.py lockstep:=true seed:=7 model_path:=/path/to/model.pt
     ros2 launch pd_bringup stack.launch.py namespace:=/vehicle1 controller:=zemzev
+    ros2 launch pd_bringup stack.launch.py managed:=true    # brought up by pd_lifecycle_manager
 
 Parameters come from share/pd_bringup/config/{sim,policy,ocp}.yaml; the launch arguments below
 override a few of them. Topic and service names are relative: with `namespace` (default: the
@@ -15,6 +16,10 @@ A node that exits on its own (a start-up error such as a missing model file or a
 or a crash) ends the whole stack instead of leaving it running headless: the launch shuts down
 with the reason `<node> exited with status N: <its last line on stderr>` (a node says a start-up
 error in one line there). Exits while the launch is already shutting down (Ctrl-C) say nothing.
+
+With `managed:=true` the three nodes start unconfigured (`autostart` false) and
+pd_lifecycle_manager (in the same namespace) configures and activates them in order (OCP, policy,
+simulator), watches them, and takes them down in reverse on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -24,9 +29,10 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, EmitEvent, LogInfo, RegisterEventHandler
+from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit, OnProcessIO
 from launch.events import Shutdown
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
@@ -66,7 +72,19 @@ def generate_launch_description() -> LaunchDescription:
     model_path = LaunchConfiguration("model_path")
     controller = LaunchConfiguration("controller")
     namespace = LaunchConfiguration("namespace")
+    managed = LaunchConfiguration("managed")
+    # each node's `autostart`: false when the manager brings the stack up
+    autostart = {
+        "autostart": ParameterValue(
+            PythonExpression(["'", managed, "'.lower() not in ('true', '1')"]), value_type=bool
+        )
+    }
     arguments = [
+        DeclareLaunchArgument(
+            "managed",
+            default_value="false",
+            description="true: nodes wait unconfigured and pd_lifecycle_manager brings them up",
+        ),
         DeclareLaunchArgument(
             "namespace", default_value="", description="namespace of the whole stack"
         ),
@@ -100,6 +118,7 @@ def generate_launch_description() -> LaunchDescription:
                     "lockstep": ParameterValue(lockstep, value_type=bool),
                     "seed": ParameterValue(seed, value_type=int),
                 },
+                autostart,
             ],
         ),
         "pd_policy_node": Node(
@@ -114,6 +133,7 @@ def generate_launch_description() -> LaunchDescription:
                     "model_path": ParameterValue(model_path, value_type=str),
                     "controller": ParameterValue(controller, value_type=str),
                 },
+                autostart,
             ],
         ),
         "pd_ocp_node": Node(
@@ -122,8 +142,16 @@ def generate_launch_description() -> LaunchDescription:
             name="pd_ocp_node",
             namespace=namespace,
             output="screen",
-            parameters=[os.path.join(config, "ocp.yaml")],
+            parameters=[os.path.join(config, "ocp.yaml"), autostart],
         ),
     }
     handlers = [h for name, node in nodes.items() for h in end_stack_on_exit(node, name)]
-    return LaunchDescription([*arguments, *nodes.values(), *handlers])
+    manager = Node(
+        package="pd_bringup",
+        executable="pd_lifecycle_manager",
+        name="pd_lifecycle_manager",
+        namespace=namespace,
+        output="screen",
+        condition=IfCondition(managed),
+    )
+    return LaunchDescription([*arguments, *nodes.values(), manager, *handlers])

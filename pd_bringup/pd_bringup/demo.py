@@ -1,14 +1,19 @@
 """pd_demo: one closed-loop landing over ROS 2, end to end (what `make demo` runs).
 
-1. starts pd_sim_node, pd_policy_node, pd_ocp_node and pd_record as separate processes over DDS
-   (a ROS domain of their own, logs under <out>/logs);
+1. starts pd_sim_node, pd_policy_node, pd_ocp_node (managed nodes, waiting unconfigured) and
+   pd_record as separate processes over DDS (a ROS domain of their own, logs under <out>/logs),
+   and brings the three up with the lifecycle manager (`pd_bringup.lifecycle_manager`:
+   configure OCP, policy, simulator, then activate them in that order), printing every
+   transition; the manager watches them through the flight;
 2. starts the episode with /sim/reset (Table 3 sampled with --seed by the simulator, which
    replies with the initial state) and asks /ocp/compute_trajectory for the optimal trajectory
    from that state, while the lander flies in closed loop at the real 5 Hz (--fast: lockstep, as
    fast as the policy answers), recorded to an MCAP bag;
 3. prints the touchdown state, fuel against the OCP's fuel and whether it landed, writes a PNG of
    the flight beside the OCP's trajectory and one drawn from the bag alone (bag.png: lander/path
-   and ocp/plan, as `scripts/bag_to_png.py` draws it), stops every process it started and exits 0
+   and ocp/plan, as `scripts/bag_to_png.py` draws it), takes the stack down through the manager
+   (deactivate, cleanup, shutdown in reverse order; the transitions are in the bag too), stops
+   every process it started and exits 0
    (1 if the stack failed to fly the episode; landing or crashing both count as flown).
 
 It starts its own nodes on a domain of its own: a `--ros-args` section (as `ros2 run` or a launch
@@ -30,11 +35,14 @@ from pd_bringup import bag_plot
 from pd_bringup.bag import BagError, read_bag
 from pd_bringup.flight import FlightClient, FlightError
 from pd_bringup.guidance import bag_counts, node_counts
+from pd_bringup.lifecycle_manager import LifecycleManager
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD
 from pd_core.plots import flight_vs_ocp
+from pd_ros_common import names
 from pd_ros_common.cli import UsageError, split_ros_args
 from pd_ros_common.convert import final_state
 from pd_ros_common.domain import claim_domain_id
+from pd_ros_common.lifecycle import TRANSITION_EVENT
 from pd_ros_common.process import ProcessError, Supervisor, executable
 from pd_ros_common.session import SERVICE_SETTLE_S
 
@@ -89,10 +97,55 @@ def main(argv: list[str] | None = None) -> int:
 
 def start_stack(sup: Supervisor, args: argparse.Namespace, bag: Path) -> None:
     policy = {"controller": args.controller, **({"model_path": args.model} if args.model else {})}
-    sup.node("pd_sim_node", {"lockstep": args.fast, "autostart": False})
-    sup.node("pd_policy_node", policy)
-    sup.node("pd_ocp_node")
+    managed = {"autostart": False}  # the lifecycle manager brings them up
+    sup.node("pd_sim_node", {"lockstep": args.fast, "start_episode": False, **managed})
+    sup.node("pd_policy_node", {**policy, **managed})
+    sup.node("pd_ocp_node", managed)
     sup.start("pd_record", [executable("pd_bringup", "pd_record"), "-o", str(bag)])
+
+
+def bring_up(flight: FlightClient, sup: Supervisor) -> LifecycleManager:
+    """The lifecycle manager on the flight client's node, the stack brought up by it (every
+    transition printed) once the recorder hears the transition events."""
+    manager = LifecycleManager(
+        flight.node,
+        lambda pred, timeout_s: flight.spin_until(pred, timeout_s, sup.check_alive),
+        names.MANAGED_NODES,
+        say=lambda line: print(f"  lifecycle: {line}", flush=True),
+    )
+    missing = manager.wait_for_services(START_TIMEOUT_S)
+    if missing:
+        raise FlightError(f"no lifecycle services of {', '.join(missing)}")
+    # a reliable, volatile writer sends only to readers it has matched: the recorder's
+    # subscriptions must have matched the transition-event writers before the first transition
+    hears = {t: 1 for t in names.TRANSITION_TOPICS}
+    if not flight.spin_until(
+        lambda: flight.reported_at_least("writers", hears), START_TIMEOUT_S, sup.check_alive
+    ):
+        raise FlightError("pd_record does not hear the nodes' transition events")
+    flight.spin_for(SERVICE_SETTLE_S)  # discovery both ways (pd_ros_common.session)
+    if not manager.startup():
+        raise FlightError(f"the stack did not come up: {manager.failure}")
+    return manager
+
+
+def watch(manager: LifecycleManager, sup: Supervisor) -> None:
+    """FlightError when a node failed (the manager has taken the others down)."""
+    sup.check_alive()
+    failure = manager.watch()
+    if failure is not None:
+        raise FlightError(failure)
+
+
+def take_down(manager: LifecycleManager, flight: FlightClient | None) -> None:
+    """Deactivate, cleanup and shutdown in reverse order; then let the recorder write every
+    transition event the manager heard."""
+    print("pd_demo: taking the stack down", flush=True)
+    manager.shutdown()
+    if flight is not None:
+        heard = {TRANSITION_EVENT.format(n): len(e) for n, e in manager.events.items()}
+        if not flight.spin_until(lambda: flight.recorded_at_least(heard), RECORDED_TIMEOUT_S):
+            print("pd_demo: the recorder did not report every transition event", flush=True)
 
 
 def flown_by(sup: Supervisor) -> str:
@@ -112,11 +165,12 @@ def run(args: argparse.Namespace) -> int:
     mode = "lockstep (FAST)" if args.fast else "real time, 5 Hz"
     print(f"pd_demo: {mode}, seed {args.seed}, ROS_DOMAIN_ID={domain}, output {out}", flush=True)
     sup = Supervisor(out / "logs", {"ROS_DOMAIN_ID": str(domain)})
-    flight = None
+    flight = manager = None
     t_start = time.monotonic()
     try:
         start_stack(sup, args, bag)
         flight = FlightClient(domain)
+        manager = bring_up(flight, sup)
         if not flight.spin_until(flight.stack_ready, START_TIMEOUT_S, sup.check_alive):
             tails = "\n".join(f"  {c.name}:\n{c.tail(5)}" for c in sup.children)
             raise FlightError(f"the stack did not come up within {START_TIMEOUT_S:g} s\n{tails}")
@@ -133,13 +187,15 @@ def run(args: argparse.Namespace) -> int:
         ocp = flight.solve_ocp(s0, method=args.method, objective=args.objective)
         print_ocp(ocp, args.objective)
         budget = 60.0 if args.fast else MAX_EPISODE_TIME_S + 30.0
-        result = flight.result_of(episode, budget, sup.check_alive)
+        result = flight.result_of(episode, budget, lambda: watch(manager, sup))
         wall = time.monotonic() - t_fly
         states, thrust = flight.trajectory(episode)
         if not flight.spin_until(flight.recorded_all, RECORDED_TIMEOUT_S, sup.check_alive):
             wait = f"{RECORDED_TIMEOUT_S:g} s"
             print(f"pd_demo: the recorder did not report every message in {wait}", flush=True)
     finally:
+        if manager is not None:
+            take_down(manager, flight)
         sup.stop_all(first="pd_record")  # the recorder first: it closes the bag
         if flight is not None:
             flight.close()

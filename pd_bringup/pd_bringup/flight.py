@@ -75,12 +75,17 @@ class FlightClient(RosSession):
     def readers_at_least(self, need: dict[str, int]) -> bool:
         """The writer of each of `need`'s (relative) topics reports at least that many matched
         readers in its latest /diagnostics."""
-        return self._reported_at_least("readers", need)
+        return self.reported_at_least("readers", need)
 
-    def _reported_at_least(self, key: str, need: dict[str, int]) -> bool:
+    def reported_at_least(self, key: str, need: dict[str, int]) -> bool:
         """Some node's latest /diagnostics has `<key> <topic>` >= n for each (relative) topic."""
         resolve = self.node.resolve_topic_name
         return all(self.diagnostics.highest(f"{key} {resolve(t)}") >= n for t, n in need.items())
+
+    def recorded_at_least(self, need: dict[str, int]) -> bool:
+        """A recorder reports (/diagnostics `messages <topic>`) at least `need[topic]` messages
+        written of each (relative) topic."""
+        return self.reported_at_least("messages", need)
 
     def recorded_all(self) -> bool:
         """A recorder reports (its /diagnostics `messages <topic>`, written to the bag) at least
@@ -93,7 +98,7 @@ class FlightClient(RosSession):
             names.COMMAND_TOPIC: n_cmd,
             names.GUIDANCE_TOPIC: n_cmd,
         }
-        return self._reported_at_least("messages", need)
+        return self.reported_at_least("messages", need)
 
     # ------------------------------------------------------------------ the flight
     def reset(self, seed: int, state: np.ndarray | None = None) -> tuple[int, np.ndarray]:

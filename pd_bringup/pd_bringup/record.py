@@ -21,10 +21,19 @@ resolve in the recorder's namespace; topics of unknown type are looked up in the
 stop during that wait records the topics whose type is known). ROS arguments (`--ros-args ...`)
 may come anywhere on the command line.
 
-By default it records the lander/* topics, the viewer topics (lander/odom, lander/path, ocp/plan)
-and /diagnostics (not /clock: `ros2 bag play --clock` makes one). It publishes its own
-/diagnostics at 1 Hz: messages per topic, gaps (never arrived), DDS losses, messages queued and
-not written; ERROR once anything was lost (pd_ros_common.diagnostics).
+A publisher that appears while it records (a simulator restarted after a crash) sends its first
+messages before DDS has matched it with the recorder, and a reliable, volatile writer never
+sends those to a reader it matched later: they cannot be recorded. Such a publisher (first seen
+in the graph more than NEW_PUBLISHER_AFTER_S after the start) is known by its sequence numbers,
+which start at 1: the messages before its first one are counted, logged, in the closing line
+("missed before a new publisher matched") and in metadata.yaml's custom_data
+(`pd_record.missed_before_match`, beside `pd_record.lost`); /diagnostics is then at WARN.
+
+By default it records the lander/* topics, the viewer topics (lander/odom, lander/path,
+ocp/plan), /diagnostics and the managed nodes' `<node>/transition_event`
+(lifecycle_msgs/TransitionEvent), not /clock (`ros2 bag play --clock` makes one). It publishes
+its own /diagnostics at 1 Hz: messages per topic, gaps (never arrived), DDS losses, messages
+queued and not written; ERROR once anything was lost (pd_ros_common.diagnostics).
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import TransitionEvent
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -67,6 +77,7 @@ KNOWN_TYPES: dict[str, type] = {
     names.PLAN_TOPIC: PathMsg,
     names.DIAGNOSTICS_TOPIC: DiagnosticArray,
     names.CLOCK_TOPIC: Clock,
+    **{t: TransitionEvent for t in names.TRANSITION_TOPICS},
 }
 KNOWN_QOS = {  # fallback when no publisher is seen
     names.EPISODE_TOPIC: qos.EPISODE_QOS,
@@ -75,6 +86,9 @@ KNOWN_QOS = {  # fallback when no publisher is seen
     names.DIAGNOSTICS_TOPIC: qos.DIAGNOSTICS_QOS,
     names.CLOCK_TOPIC: qos.CLOCK_QOS,
 }
+# A publisher first seen this long after the recording began appeared while it recorded (a
+# restarted node): what it sent before it matched the recorder is counted, not in the bag.
+NEW_PUBLISHER_AFTER_S = 3.0
 STOP_DRAIN_S = 0.7  # after a stop request, write what is queued for at most this long
 TAKE_S = 0.25  # ... after taking, for this long, what DDS had delivered already
 
@@ -102,8 +116,9 @@ class Recorder(Node):
             t in self.known_qos and qos.keeps_latest_only(self.known_qos[t]) for t in self.topics
         ]
         self.lost_events = 0
+        self.subscriptions_by_topic = {}
         for i, topic in enumerate(self.topics):
-            self.create_subscription(
+            self.subscriptions_by_topic[topic] = self.create_subscription(
                 self.types[topic],
                 topic,
                 self._queuer(sink, i),
@@ -111,6 +126,36 @@ class Recorder(Node):
                 raw=True,
                 event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
             )
+        self._t0 = time.monotonic()
+        self._present: list[set[bytes]] = [set() for _ in self.topics]
+        self._publishers_timer = None
+        self._watch_publishers()
+        self._publishers_timer = self.create_timer(0.2, self._watch_publishers)
+
+    def _watch_publishers(self) -> None:
+        """The publishers of each topic in the first NEW_PUBLISHER_AFTER_S (the graph)."""
+        if time.monotonic() - self._t0 > NEW_PUBLISHER_AFTER_S:
+            if self._publishers_timer is not None:
+                self._publishers_timer.cancel()
+                self.get_logger().info(
+                    "publishers that appear from now on are new: what they send before they "
+                    "match the recorder is counted as missed"
+                )
+            return
+        for i, topic in enumerate(self.topics):
+            found = {bytes(e.endpoint_gid) for e in self.get_publishers_info_by_topic(topic)}
+            self._present[i] |= found  # set update: the writer thread only reads
+
+    def is_new(self, index: int) -> Callable[[bytes], bool]:
+        """Whether a publisher (gid) of topic `index` appeared while recording: first heard
+        after NEW_PUBLISHER_AFTER_S and not in the graph before."""
+
+        def new(gid: bytes) -> bool:
+            if time.monotonic() - self._t0 <= NEW_PUBLISHER_AFTER_S:
+                return False
+            return gid not in self._present[index]
+
+        return new
 
     @staticmethod
     def _queuer(sink: queue.SimpleQueue, index: int) -> Callable[[bytes, Any], None]:
@@ -182,10 +227,23 @@ class Recorder(Node):
             "gaps (never arrived)": sum(gaps),
             **{f"gaps {t}": n for t, n in zip(self.topics, gaps, strict=True) if n},
             "superseded (latest-value topics)": sum(w.superseded),
+            "missed before a new publisher matched": sum(w.before_match),
             "lost (DDS events)": self.lost_events,
             "queued": w.sink.qsize(),
+            # publishers each subscription has matched (DDS): a tool waits for these before
+            # the first message it needs recorded (pd_demo: the nodes' transition events)
+            **{
+                f"writers {t}": s.get_publisher_count()
+                for t, s in self.subscriptions_by_topic.items()
+            },
         }
         r.rule(diagnostics.ERROR, lost > 0, f"{lost} message(s) lost since the start")
+        early = sum(w.before_match)
+        r.rule(
+            diagnostics.WARN,
+            early > 0,
+            f"{early} message(s) sent by new publishers before they matched the recorder",
+        )
         return r
 
     def freeze_qos(self) -> None:
@@ -209,7 +267,8 @@ class BagWriter(threading.Thread):
         self.gaps = [0] * len(rec.topics)
         self.superseded = [0] * len(rec.topics)
         self.unwritten = 0
-        self._gaps = [SequenceGaps() for _ in rec.topics]
+        self.before_match = [0] * len(rec.topics)  # sent by new publishers before matching
+        self._gaps = [SequenceGaps(rec.is_new(i)) for i in range(len(rec.topics))]
         self._stop_at: float | None = None
         self.error: BaseException | None = None
 
@@ -250,6 +309,14 @@ class BagWriter(threading.Thread):
         self.writer.write(self.conns[index], stamp, raw)
         self.counts[index] += 1
         missing, first, last = self._gaps[index].update(info)
+        early = self._gaps[index].last_before_match
+        if early:
+            self.before_match[index] += early
+            self.rec.get_logger().warning(
+                f"{early} message(s) of {topic} were sent by a new publisher before it matched "
+                f"the recorder (publisher sequence 1..{early}): not in the bag "
+                f"[{self.before_match[index]} missed so on this topic]"
+            )
         if missing and self.rec.latest_only[index]:
             self.superseded[index] += missing
         elif missing:
@@ -272,6 +339,11 @@ class BagWriter(threading.Thread):
         for index in range(len(self.rec.topics)):  # topics never heard are in the bag too
             if index not in self.conns:
                 self._connect(index)
+        missed = {t: n for t, n in zip(self.rec.topics, self.before_match, strict=True) if n}
+        lost = {t: n for t, n in zip(self.rec.topics, self.gaps, strict=True) if n}
+        # metadata.yaml custom_data (rosbag2): what the bag lacks, per topic
+        self.writer.set_custom_data("pd_record.missed_before_match", _per_topic(missed))
+        self.writer.set_custom_data("pd_record.lost", _per_topic(lost))
         self.writer.close()
 
     def summary(self) -> str:
@@ -279,10 +351,17 @@ class BagWriter(threading.Thread):
         for i, topic in enumerate(self.rec.topics):
             lost = f", {self.gaps[i]} LOST" if self.gaps[i] else ""
             newer = f", {self.superseded[i]} superseded" if self.superseded[i] else ""
-            parts.append(f"{topic}: {self.counts[i]}{lost}{newer}")
+            early = self.before_match[i]
+            early = f", {early} missed before a new publisher matched" if early else ""
+            parts.append(f"{topic}: {self.counts[i]}{lost}{newer}{early}")
         if self.unwritten:
             parts.append(f"{self.unwritten} queued at the stop deadline NOT WRITTEN")
         return ", ".join(parts)
+
+
+def _per_topic(counts: dict[str, int]) -> str:
+    """`topic n, topic n` ("0" when none): a custom_data value (rosbag2 keeps strings)."""
+    return ", ".join(f"{t} {n}" for t, n in counts.items()) or "0"
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

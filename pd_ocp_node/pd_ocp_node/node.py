@@ -16,6 +16,11 @@ landing_site, TRANSIENT_LOCAL: a viewer started later still draws the last plan;
 the node's time now plus the plan's state time k). /diagnostics (1 Hz): solve times, requests
 pending, busy and failed answers (levels: pd_ros_common.diagnostics).
 
+A managed (lifecycle) node: configure starts the solver process, activate lets requests through;
+unconfigured or inactive, every request is answered success=false ("refused: pd_ocp_node is
+inactive"), while parameters and /diagnostics keep answering. cleanup stops the solver process.
+`autostart` (default true) configures and activates it at start-up.
+
 Parameters are listed in PARAMETERS below (defaults in pd_bringup/config/ocp.yaml); method,
 objective, control_points and timeout_s may be changed at run time (validated) and apply to the
 next request that leaves the field empty or zero.
@@ -38,7 +43,6 @@ from typing import Any
 import numpy as np
 from nav_msgs.msg import Path
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.node import Node
 
 from pd_core import ocp
 from pd_core.config import OCP_CONTROL_POINTS
@@ -47,6 +51,7 @@ from pd_core.ocp import kernels
 from pd_interfaces.srv import ComputeTrajectory
 from pd_ros_common import diagnostics, names, params, qos
 from pd_ros_common.convert import fill_ocp_response, from_vec3, plan_path_msg, vec3
+from pd_ros_common.lifecycle import AUTOSTART, ManagedNode
 from pd_ros_common.run import run_node
 
 NODE_NAME = "pd_ocp_node"
@@ -81,6 +86,7 @@ PARAMETERS: dict[str, tuple[Any, str, bool]] = {
         "'busy' at once. Read at start-up (sizes the executor).",
         True,
     ),
+    "autostart": (*AUTOSTART, True),
 }
 # The same checks at start-up and for `ros2 param set` (pd_ros_common.params).
 CHECKS: dict[str, params.Check] = {
@@ -121,27 +127,30 @@ def _solver_pool() -> ProcessPoolExecutor:
 SOLVER_GRACE_S = 10.0
 
 
-class OcpNode(Node):
-    """Thin ROS adapter over `pd_core.ocp.solve`."""
+class OcpNode(ManagedNode):
+    """Thin ROS adapter over `pd_core.ocp.solve`. configure starts the solver process (its
+    kernels warmed up), activate lets requests through; otherwise they are answered
+    success=false with the node's lifecycle state."""
 
     def __init__(self, **kwargs: Any) -> None:
         self._pool: ProcessPoolExecutor | None = None  # destroy_node works whatever fails
         super().__init__(NODE_NAME, **kwargs)
         p = params.declare(self, PARAMETERS, CHECKS)
+        self.autostart = p["autostart"]
         self.max_pending = p["max_pending"]
         self._solve_lock = threading.Lock()  # one solve at a time: they are CPU-bound
-        self._pool = _solver_pool()
         self._count_lock = threading.Lock()
         self._pending = 0
         self.served = 0
         self.succeeded = 0
         self.failed = 0  # answered success=false (bad request, solver failure, timeout)
         self.busy = 0  # answered "busy" at once
+        self.refused = 0  # answered success=false while not active
         self._solve_times: deque[float] = deque(maxlen=10_000)
         self._period_solve_times: list[float] = []
         self._since = diagnostics.Since()
-        self._plan_pub = self.create_publisher(Path, names.PLAN_TOPIC, qos.PATH_QOS)
-        self.diagnostics = diagnostics.Diagnostics(self, "ocp", self._report)
+        self._plan_pub: Any = None
+        self.diagnostics = diagnostics.Diagnostics(self, "ocp", self.managed_report(self._report))
         self.create_service(
             ComputeTrajectory,
             names.OCP_SERVICE,
@@ -149,11 +158,29 @@ class OcpNode(Node):
             qos_profile=qos.SERVICE_QOS,  # a burst waits here instead of being dropped
             callback_group=ReentrantCallbackGroup(),
         )
-        self.get_logger().info(
-            f"OCP service ready: method={p['method']}, objective={p['objective']}, "
-            f"control_points={p['control_points']}, timeout_s={p['timeout_s']}, "
-            f"max_pending={p['max_pending']}"
+
+    def _configure(self) -> str:
+        self._pool = _solver_pool()
+        self._plan_pub = self.own(
+            self.create_lifecycle_publisher(Path, names.PLAN_TOPIC, qos.PATH_QOS)
         )
+        return (
+            f"OCP service ready: method={self._param('method')}, "
+            f"objective={self._param('objective')}, "
+            f"control_points={self._param('control_points')}, "
+            f"timeout_s={self._param('timeout_s')}, max_pending={self.max_pending}"
+        )
+
+    def _activate(self) -> str:
+        return f"answering {self.get_namespace().rstrip('/')}/{names.OCP_SERVICE}"
+
+    def _deactivate(self) -> str:
+        return "new requests are refused (a solve in progress finishes)"
+
+    def _release(self) -> str:
+        self._stop_pool()
+        self._plan_pub = None
+        return f"solver process stopped ({self.served} requests solved)"
 
     def _param(self, name: str) -> Any:
         return params.value(self, name, PARAMETERS)
@@ -161,6 +188,12 @@ class OcpNode(Node):
     def _on_request(
         self, request: ComputeTrajectory.Request, response: ComputeTrajectory.Response
     ) -> ComputeTrajectory.Response:
+        if not self.active:
+            with self._count_lock:
+                self.refused += 1
+            response.success = False
+            response.message = f"refused: {self.refusal()}"
+            return response
         with self._count_lock:
             busy = self._pending >= self.max_pending
             if not busy:
@@ -196,7 +229,7 @@ class OcpNode(Node):
             if response.solve_time > 0:
                 self._solve_times.append(response.solve_time)
                 self._period_solve_times.append(response.solve_time)
-        if response.success and len(response.positions):
+        if response.success and len(response.positions) and self._plan_pub is not None:
             now_ns = self.get_clock().now().nanoseconds
             self._plan_pub.publish(plan_path_msg(response, now_ns))
 
@@ -220,6 +253,7 @@ class OcpNode(Node):
             "succeeded": succeeded,
             "failed": failed,
             "busy answers": busy,
+            "refused (not active)": self.refused,
             "solved (last period)": len(period),
             "solve time p50 (s)": pct(50),
             "solve time p99 (s)": pct(99),
@@ -295,34 +329,45 @@ class OcpNode(Node):
         """`ocp.solve` in the solver process (caller holds the solve lock)."""
         t0 = time.monotonic()
         base = {"method": kwargs["method"], "objective": kwargs["objective"]}
+        pool = self._pool
+        if pool is None:  # released (cleanup) while this request waited
+            return ocp.OCPResult(False, "refused: the solver process was released", **base)
         try:
-            future = self._pool.submit(ocp.solve, *args, **kwargs)
+            future = pool.submit(ocp.solve, *args, **kwargs)
             return future.result(timeout=kwargs["timeout_s"] + SOLVER_GRACE_S)
         except FutureTimeout:
             why = f"timeout: the solver did not return within {kwargs['timeout_s']:.1f} s"
         except BrokenProcessPool as exc:
             why = f"solver process died: {exc}"
+            if self._pool is None:  # released (cleanup) while solving
+                return ocp.OCPResult(False, f"{why} (released)", **base)
         self.get_logger().error(f"{why}; starting a new solver process")
         self._restart_pool()
         return ocp.OCPResult(False, why, solve_time=time.monotonic() - t0, **base)
 
     def _restart_pool(self) -> None:
         old = self._pool
+        if old is None:
+            return
         for proc in list(getattr(old, "_processes", {}).values()):
             proc.terminate()
         old.shutdown(wait=False, cancel_futures=True)
         self._pool = _solver_pool()
 
-    def destroy_node(self) -> None:
+    def _stop_pool(self) -> None:
         # Stop the solver process and join the pool's manager thread now: left to the
         # interpreter's exit hook, it writes to a closed pipe and prints a traceback.
-        if self._pool is not None:
-            procs = list(getattr(self._pool, "_processes", {}).values())
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            procs = list(getattr(pool, "_processes", {}).values())
             for proc in procs:
                 proc.terminate()
             for proc in procs:
                 proc.join(timeout=2.0)
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def destroy_node(self) -> None:
+        self._stop_pool()
         super().destroy_node()
 
     def _discretise(self, res: ocp.OCPResult, response: ComputeTrajectory.Response) -> None:

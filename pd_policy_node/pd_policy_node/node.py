@@ -25,6 +25,11 @@ state of each further lander is logged as an error naming it; /diagnostics is th
 (`Runtime.counts`), the model file and the runtime config's hash (levels:
 pd_ros_common.diagnostics).
 
+A managed (lifecycle) node: configure loads the policy (the slow part: torch, the weights, a
+warm-up) and makes its topics; activate starts answering; inactive, states are counted and never
+answered; cleanup releases the policy with its decision-time summary. `autostart` (default
+true) configures and activates it at start-up, where a bad model file stops it in one line.
+
 Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
 """
 
@@ -39,7 +44,6 @@ from typing import Any
 
 import numpy as np
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 
 import pd_core
 from pd_core.config import TABLE3
@@ -50,6 +54,7 @@ from pd_core.state import check_state
 from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
 from pd_ros_common import diagnostics, names, params, qos
 from pd_ros_common.convert import command_msg, guidance_msg, state_from_msg
+from pd_ros_common.lifecycle import AUTOSTART, ManagedNode
 from pd_ros_common.run import run_node
 
 NODE_NAME = names.POLICY_NODE
@@ -89,6 +94,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "Log decision-time statistics (p50/p99/max of the state->command callback) every this "
         "many seconds; 0 = only at shutdown.",
     ),
+    "autostart": AUTOSTART,
 }
 CHECKS: dict[str, params.Check] = {
     "stats_period_s": params.at_least(0.0),
@@ -154,13 +160,30 @@ def load_controller(
     return runtime, f"{what}, {layer}, config {runtime.config.digest()})"
 
 
-class PolicyNode(Node):
-    """Thin ROS adapter over a `pd_core` policy or controller."""
+class PolicyNode(ManagedNode):
+    """Thin ROS adapter over a `pd_core` policy or controller. configure loads it (and warms
+    it up) and makes the topics; inactive, states are heard and counted but never answered."""
+
+    expected_errors = (*ManagedNode.expected_errors, PolicyLoadError)
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        p = params.declare(self, PARAMETERS, CHECKS)
-        self.controller_name = p["controller"]
+        self._p = params.declare(self, PARAMETERS, CHECKS)
+        self.autostart = self._p["autostart"]
+        self.controller_name = self._p["controller"]
+        self.model_file = model_file(self._p["controller"], self._p["model_path"])
+        self.policy: Runtime | None = None
+        self.ignored = 0  # states heard while not active (never answered)
+        self.diagnostics = diagnostics.Diagnostics(
+            self,
+            "policy",
+            self.managed_report(self._report),
+            hardware_id=lambda: ", ".join(sorted(self.landers)),
+        )
+        self.landers: dict[str, int] = {}  # states received per lander_id (non-empty ids)
+
+    def _configure(self) -> str:
+        p = self._p
         self.policy, described = load_controller(
             p["controller"], p["model_path"], p["shield"], p["shield_settings"]
         )
@@ -168,11 +191,10 @@ class PolicyNode(Node):
             # Warm up numpy so the first real state is answered as fast as the rest (not the
             # reference controllers: an MPC teacher would plan, and remember, a fake flight).
             self.policy.bare_action((TABLE3.lo + TABLE3.hi) / 2)
-        self.model_file = model_file(p["controller"], p["model_path"])
         self.config_hash = self.policy.config.digest()
         # (lander_id, episode) the runtime's memory belongs to
         self._episode: tuple[str, int] | None = None
-        self.landers: dict[str, int] = {}  # states received per lander_id (non-empty ids)
+        self.landers = {}
         self._landers_period: set[str] = set()
         self._period_times: list[float] = []
         self._since = diagnostics.Since()
@@ -190,25 +212,35 @@ class PolicyNode(Node):
         self.repeats = 0  # states answered already (a lockstep resend while we were busy)
 
         # Created after the model loaded: a publisher on lander/thrust_cmd means "ready".
-        self._status_pub = self.create_publisher(
-            GuidanceStatus, names.GUIDANCE_TOPIC, qos.LOOP_PUB_QOS
-        )
-        self._cmd_pub = self.create_publisher(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS)
-        self._state_sub = self.create_subscription(
-            LanderState,
-            names.STATE_TOPIC,
-            self._on_state,
-            qos.LOOP_SUB_QOS,
-            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
+        pub = self.create_lifecycle_publisher
+        self._status_pub = self.own(pub(GuidanceStatus, names.GUIDANCE_TOPIC, qos.LOOP_PUB_QOS))
+        self._cmd_pub = self.own(pub(ThrustCommand, names.COMMAND_TOPIC, qos.LOOP_PUB_QOS))
+        self._state_sub = self.own(
+            self.create_subscription(
+                LanderState,
+                names.STATE_TOPIC,
+                self._on_state,
+                qos.LOOP_SUB_QOS,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
+            )
         )
         if p["stats_period_s"] > 0:
-            self.create_timer(p["stats_period_s"], self._log_stats)
-        self.get_logger().info(f"policy ready: {described}")
+            self.own(self.create_timer(p["stats_period_s"], self._log_stats))
         # DDS discovery of the simulator takes a moment after start-up; say when it is done.
-        self._connect_timer = self.create_timer(0.05, self._check_connected)
-        self.diagnostics = diagnostics.Diagnostics(
-            self, "policy", self._report, hardware_id=lambda: ", ".join(sorted(self.landers))
-        )
+        self._connect_timer = self.own(self.create_timer(0.05, self._check_connected))
+        return f"policy ready: {described}"
+
+    def _activate(self) -> str:
+        return "answering every state"
+
+    def _deactivate(self) -> str:
+        return "states are no longer answered"
+
+    def _release(self) -> str:
+        what = f"decision time overall: {self.decision_stats()}; {self._counts()}"
+        self.get_logger().info(what)
+        self.policy = None
+        return f"policy released ({self.ignored} states ignored while not active)"
 
     def _check_connected(self) -> None:
         n = self._state_sub.get_publisher_count()
@@ -251,6 +283,9 @@ class PolicyNode(Node):
         self.landers[lander_id] = self.landers.get(lander_id, 0) + 1
 
     def _on_state(self, msg: LanderState) -> None:
+        if not self.active or self.policy is None:
+            self.ignored += 1
+            return
         t0 = time.perf_counter()
         self._count_lander(msg.lander_id)
         self._count_gap(msg)
@@ -300,7 +335,8 @@ class PolicyNode(Node):
 
     def _counts(self) -> str:
         return (
-            f"{self.answered} answered ({self.policy.describe()}), "
+            f"{self.answered} answered "
+            f"({self.policy.describe() if self.policy else self.controller_name}), "
             f"{self.repeats} repeated, {self.invalid} invalid, {self.gaps} missing (step gaps), "
             f"{self.lost} lost (DDS) states in all"
         )
@@ -344,6 +380,7 @@ class PolicyNode(Node):
             "invalid states": self.invalid,
             "missing states (gaps)": self.gaps,
             "lost states (DDS)": self.lost,
+            "ignored states (not active)": self.ignored,
             **diagnostics.readers(self._cmd_pub, self._status_pub),
         }
         r.rule(
@@ -358,9 +395,6 @@ class PolicyNode(Node):
         slow = period.size > 0 and pct(period, 99) > diagnostics.SLOW_DECISION_S * 1e3
         r.rule(diagnostics.WARN, slow, f"decision time p99 {pct(period, 99):.1f} ms")
         return r
-
-    def on_shutdown(self) -> None:
-        self.get_logger().info(f"decision time overall: {self.decision_stats()}; {self._counts()}")
 
 
 def main(args: list[str] | None = None) -> int:

@@ -19,7 +19,8 @@ Levels, from simple rules over the last period (the README lists them):
 - pd_ocp_node: WARN when a request was answered busy or failed; else OK.
 - pd_record: ERROR when a message never reached the recorder (a gap or a DDS loss) or was not
   written, since the recording began; else OK. A path superseded on a latest-value topic
-  (lander/path, ocp/plan) is reported, not an error.
+  (lander/path, ocp/plan) is reported, not an error. WARN when a publisher that appeared while
+  recording sent messages before it matched the recorder (not in the bag; counted).
 
 pd_sim_node and pd_policy_node also report `readers <topic>` for each topic they publish: the
 subscriptions their DDS writer has matched (`Publisher.get_subscription_count`). A reliable,

@@ -28,8 +28,14 @@ CHILD_FRAME_ID = "lander"  # the lander's body frame (axes parallel to the landi
 
 LANDER_TOPICS = (STATE_TOPIC, COMMAND_TOPIC, EPISODE_TOPIC, GUIDANCE_TOPIC)
 VIEW_TOPICS = (ODOM_TOPIC, PATH_TOPIC, PLAN_TOPIC)
-RECORD_TOPICS = (*LANDER_TOPICS, *VIEW_TOPICS, DIAGNOSTICS_TOPIC)  # pd_record's default
 POLICY_NODE = "pd_policy_node"  # the stack's commanding node (the simulator's command_source)
+SIM_NODE = "pd_sim_node"
+OCP_NODE = "pd_ocp_node"
+# The managed nodes in the order a lifecycle manager brings them up (down in reverse).
+MANAGED_NODES = (OCP_NODE, POLICY_NODE, SIM_NODE)
+# lifecycle_msgs/TransitionEvent of each managed node (rcl_lifecycle's <node>/transition_event)
+TRANSITION_TOPICS = tuple(f"{n}/transition_event" for n in MANAGED_NODES)
+RECORD_TOPICS = (*LANDER_TOPICS, *VIEW_TOPICS, DIAGNOSTICS_TOPIC, *TRANSITION_TOPICS)
 
 
 def resolve(name: str, namespace: str = "/") -> str:

@@ -3,12 +3,14 @@
 rclpy's own signal handlers shut the context down inside the handler, so whatever the node logs
 while it stops ("decision time overall ...") fails with "publisher's context is invalid". Here
 SIGINT and SIGTERM only set a flag; the executor is spun in short slices until it is set, and
-the node stops (`on_shutdown`, `destroy_node`) with its context still valid. A start-up error of
+the node stops (a managed node's shutdown transition, `destroy_node`) with its context still
+valid. A managed node (`pd_ros_common.lifecycle.ManagedNode`) with `autostart` true is configured
+and activated before the executor spins; a configure that fails is a start-up error. One of
 an expected kind (a bad parameter, a bad model file) is one line on stderr and an exit status,
 never a traceback. Once the node has stopped and logged, a DDS teardown that hangs (a known
 failure class, e.g. eProsima/Fast-DDS#235; seen once here in CI on a loaded machine) cannot keep
 the process alive: after `TEARDOWN_S` it says so in one line and exits with the same status.
-The watchdog is armed before `on_shutdown`, whose last log line also goes out over DDS
+The watchdog is armed before the shutdown transition, whose last log line also goes out over DDS
 (/rosout). A hang that holds the GIL (a C call that never returns, seen once more in CI: the
 node logged its last line and was SIGKILLed 10 s later without a word) stops a Python timer
 too, so faulthandler backs it up from a C thread 50 % later (before a 10 s SIGKILL): it dumps
@@ -34,6 +36,7 @@ from rclpy.executors import (
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from pd_ros_common.lifecycle import ManagedNode, start_up
 from pd_ros_common.node_help import node_help, wants_help
 from pd_ros_common.params import ParameterError
 
@@ -95,6 +98,10 @@ def run_node(
     status = 0
     try:
         node = make_node()
+        if isinstance(node, ManagedNode) and getattr(node, "autostart", True):
+            failure = start_up(node)
+            if failure is not None:
+                raise failure
         n = threads(node) if threads else 0
         executor = MultiThreadedExecutor(num_threads=n) if n > 0 else SingleThreadedExecutor()
         executor.add_node(node)
@@ -108,9 +115,8 @@ def run_node(
     finally:
         watchdog = _exit_if_teardown_hangs(name, status)
         if node is not None:
-            on_shutdown = getattr(node, "on_shutdown", None)
-            if on_shutdown is not None:
-                on_shutdown()
+            if isinstance(node, ManagedNode) and status == 0:
+                node.finish()
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:

@@ -18,6 +18,12 @@ The first valid command for a step is flown; later ones for the same step are re
 and logged like every invalid command. Every parameter is read at start-up (read-only
 afterwards); defaults are in pd_bringup/config/sim.yaml.
 
+A managed (lifecycle) node: configure makes the simulator and, with `start_episode`, its first
+episode; activate publishes its state and starts flying; deactivate holds the episode at its step
+(no state, no step; commands that arrive are kept) and activate goes on from that step, so
+nothing is lost or flown twice; sim/reset is refused unless active; cleanup drops the simulator.
+`autostart` (default true) configures and activates it at start-up.
+
 Identity: each run has a `lander_id` (the parameter, or a random one at start-up), carried by
 every lander/state and echoed by the command answering it. A command for another lander (a
 second stack on the same names, without a namespace) is counted as foreign, never flown, and the
@@ -47,7 +53,6 @@ import numpy as np
 from nav_msgs.msg import Odometry, Path
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 
@@ -77,6 +82,7 @@ from pd_ros_common.convert import (
 )
 from pd_ros_common.diagnostics import ERROR, WARN
 from pd_ros_common.gaps import SequenceGaps
+from pd_ros_common.lifecycle import AUTOSTART, ManagedNode
 from pd_ros_common.run import run_node
 from pd_ros_common.sources import PublisherNames
 
@@ -120,9 +126,16 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     "disturbance": (True, "Apply the random disturbance force of Sec. 3.2 (sigma 100 N)."),
     "autostart": (
+        AUTOSTART[0],
+        AUTOSTART[1] + " Deprecated old meaning, for this release only: given as false "
+        "without start_episode, it is read as start_episode:=false (and the node starts "
+        "active), with a warning.",
+    ),
+    "start_episode": (
         True,
-        "Start the first episode at start-up (from initial_state, or Table 3 with seed). "
-        "false = wait for sim/reset.",
+        "Start the first episode when the node is configured (from initial_state, or Table 3 "
+        "with seed); it flies once the node is active. false = wait for sim/reset. (Called "
+        "autostart before the nodes were managed.)",
     ),
     "auto_restart": (
         False,
@@ -131,8 +144,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     "initial_state": (
         [0.0],
-        "[x, y, z, vx, vy, vz, m] (m, m/s, kg) of the autostarted episode; any other length "
-        "(default [0.0]) = sample Table 3.",
+        "[x, y, z, vx, vy, vz, m] (m, m/s, kg) of the first episode (start_episode); any "
+        "other length (default [0.0]) = sample Table 3.",
     ),
     "max_time_s": (
         MAX_EPISODE_TIME_S,
@@ -226,15 +239,28 @@ CHECKS: dict[str, params.Check] = {
 }
 
 
-class SimNode(Node):
-    """Thin ROS adapter: messages in, `Simulator` calls, messages out."""
+class SimNode(ManagedNode):
+    """Thin ROS adapter: messages in, `Simulator` calls, messages out. configure makes the
+    simulator (and its first episode), activate flies it; inactive, it holds its step."""
 
     def __init__(self, **kwargs: Any) -> None:
         # Before Node.__init__: destroy_node must work whatever fails after this point.
         self._lock = threading.Lock()
         self._ticker: FixedRateTicker | None = None
+        self._sim: Simulator | None = None
         super().__init__(NODE_NAME, **kwargs)
-        p = params.declare(self, PARAMETERS, CHECKS)
+        p = self._p = params.declare(self, PARAMETERS, CHECKS)
+        self.autostart = p["autostart"]
+        self.start_episode = p["start_episode"]
+        given = self._parameter_overrides
+        if "autostart" in given and "start_episode" not in given and not p["autostart"]:
+            self.get_logger().warning(
+                "autostart:=false is read in its old meaning, start_episode:=false (deprecated, "
+                "for this release only): autostart now names the lifecycle; set "
+                "start_episode:=false to wait for sim/reset, and give start_episode with "
+                "autostart:=false for a node that waits unconfigured"
+            )
+            self.autostart, self.start_episode = True, False
         self.rate_hz = p["rate_hz"]
         self.lockstep = p["lockstep"]
         self.resend_s = p["resend_s"]
@@ -244,6 +270,27 @@ class SimNode(Node):
         self.tick_priority = p["tick_priority"]
         self.lander_id = p["lander_id"] or secrets.token_hex(4)
         self._nav_sigma = (p["nav_position_sigma_m"], p["nav_velocity_sigma_mps"])
+        self._resume_ticker = False  # a ticker was (or would be) running when not active
+        # Resets in a group of their own and the refusal delay's timer in another: a reset
+        # waiting out REFUSE_DELAY_S (a coroutine) must not hold the group of the commands.
+        self._sleep_group = ReentrantCallbackGroup()
+        self.create_service(
+            ResetEpisode,
+            names.RESET_SERVICE,
+            self._on_reset,
+            qos_profile=qos.SERVICE_QOS,
+            callback_group=MutuallyExclusiveCallbackGroup(),
+        )
+        self._foreign_at = -float("inf")  # monotonic time of the last foreign command
+        self._since = diagnostics.Since()
+        self._diag_at = time.monotonic()
+        self._diag_flying = False
+        self.diagnostics = diagnostics.Diagnostics(
+            self, "simulator", self.managed_report(self._report), hardware_id=self.lander_id
+        )
+
+    def _configure(self) -> str:
+        p = self._p
         self._sim = Simulator(
             disturbance=p["disturbance"],
             missing_command=p["missing_command"],
@@ -256,6 +303,7 @@ class SimNode(Node):
             lander_id=self.lander_id,
         )
         self._restart_due = False
+        self._resume_ticker = False
         self._waiting_since: float | None = None  # real time: episode waits for its 1st command
         self._last_publish = time.monotonic()
         self._lateness: list[float] = []
@@ -264,64 +312,91 @@ class SimNode(Node):
         self._sources = PublisherNames(
             lambda: self.get_publishers_info_by_topic(self._cmd_sub.topic_name)
         )
-        self._foreign_at = -float("inf")  # monotonic time of the last foreign command
         self._clock_ns = 0  # simulation clock: dt per step, across episodes (integer ns)
         self._path: list[Any] = []  # PoseStamped of the episode so far
         self._path_key: tuple[int, int] = (0, -1)  # (episode, step) of the last pose
         self._path_sent = 0  # poses in the last lander/path published
+        self._unpublished = False  # a state made while not active: published on activate
 
-        self._state_pub = self.create_publisher(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS)
-        self._episode_pub = self.create_publisher(
-            EpisodeResult, names.EPISODE_TOPIC, qos.EPISODE_QOS
+        pub, own = self.create_lifecycle_publisher, self.own
+        self._state_pub = own(pub(LanderState, names.STATE_TOPIC, qos.LOOP_PUB_QOS))
+        self._episode_pub = own(pub(EpisodeResult, names.EPISODE_TOPIC, qos.EPISODE_QOS))
+        self._cmd_sub = own(
+            self.create_subscription(
+                ThrustCommand,
+                names.COMMAND_TOPIC,
+                self._on_command,
+                qos.LOOP_SUB_QOS,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
+            )
         )
-        self._cmd_sub = self.create_subscription(
-            ThrustCommand,
-            names.COMMAND_TOPIC,
-            self._on_command,
-            qos.LOOP_SUB_QOS,
-            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost),
-        )
-        # Resets in a group of their own and the refusal delay's timer in another: a reset
-        # waiting out REFUSE_DELAY_S (a coroutine) must not hold the group of the commands.
-        self._sleep_group = ReentrantCallbackGroup()
-        self.create_service(
-            ResetEpisode,
-            names.RESET_SERVICE,
-            self._on_reset,
-            qos_profile=qos.SERVICE_QOS,
-            callback_group=MutuallyExclusiveCallbackGroup(),
-        )
-        self._odom_pub = self.create_publisher(Odometry, names.ODOM_TOPIC, qos.LOOP_PUB_QOS)
-        self._path_pub = self.create_publisher(Path, names.PATH_TOPIC, qos.PATH_QOS)
+        self._odom_pub = own(pub(Odometry, names.ODOM_TOPIC, qos.LOOP_PUB_QOS))
+        self._path_pub = own(pub(Path, names.PATH_TOPIC, qos.PATH_QOS))
         self._clock_pub = (
-            self.create_publisher(Clock, names.CLOCK_TOPIC, qos.CLOCK_QOS)
-            if self.lockstep
-            else None
+            own(pub(Clock, names.CLOCK_TOPIC, qos.CLOCK_QOS)) if self.lockstep else None
         )
         if p["path_period_s"] > 0:
-            self.create_timer(p["path_period_s"], self._path_timer)
-        self._since = diagnostics.Since()
-        self._diag_at = time.monotonic()
-        self._diag_flying = False
-        self.diagnostics = diagnostics.Diagnostics(
-            self, "simulator", self._report, hardware_id=self.lander_id
-        )
+            own(self.create_timer(p["path_period_s"], self._path_timer))
         self._links = (-1, -1)
-        self.create_timer(0.1, self._log_links)
-        self.create_timer(min(self.resend_s or 0.5, 0.5) / 2, self._resend_check)
+        own(self.create_timer(0.1, self._log_links))
+        own(self.create_timer(min(self.resend_s or 0.5, 0.5) / 2, self._resend_check))
+        if self.start_episode:
+            init = p["initial_state"]
+            state = np.asarray(init, dtype=float) if len(init) == 7 else None
+            with self._lock:
+                self._start_episode(state, None, wait=True)
 
         mode = "lockstep" if self.lockstep else f"real time at {self.rate_hz:g} Hz"
-        self.get_logger().info(
+        return (
             f"simulator ready: {mode}, missing_command={p['missing_command']}, "
             f"disturbance={p['disturbance']}, seed={p['seed']}, "
             f"command_source={p['command_source'] or '(any publisher)'}, "
             f"lander_id={self.lander_id}"
         )
-        if p["autostart"]:
-            init = p["initial_state"]
-            state = np.asarray(init, dtype=float) if len(init) == 7 else None
-            with self._lock:
-                self._start_episode(state, None, wait=True)
+
+    def _where(self) -> str:
+        s = self._sim
+        if s is None or not s.counters.episodes_started:
+            return "no episode yet"
+        return f"episode {s.episode} at step {s.step}" + ("" if s.flying else " (ended)")
+
+    def _activate(self) -> str:
+        with self._lock:
+            s = self._sim
+            self._last_publish = time.monotonic()  # an answer in flight has resend_s to land
+            if self._unpublished:
+                self._unpublished = False
+                self._publish_state()
+            if s.flying and self._waiting_since is not None:
+                if s.has_fresh_command:  # the first command came while the node was inactive
+                    self._start_ticker()
+                else:
+                    self._waiting_since = time.monotonic()
+            elif self._resume_ticker:
+                self._start_ticker()
+            elif self.lockstep and s.flying and s.has_fresh_command:
+                self._advance()  # the answer came while the node was inactive
+            return f"flying, {self._where()}" if s.flying else f"{self._where()}; idle"
+
+    def _deactivate(self) -> str:
+        with self._lock:
+            running = self._ticker is not None or self._resume_ticker
+            self._stop_ticker()
+            self._resume_ticker = running
+            return f"{self._where()} held"
+
+    def _release(self) -> str:
+        with self._lock:
+            self._stop_ticker()
+            s, self._sim = self._sim, None
+        if s is None:
+            return "nothing held"
+        dropped = f"; {self._where_of(s)} dropped" if s.flying else ""
+        return f"simulator released after {s.counters.episodes_started} episode(s){dropped}"
+
+    @staticmethod
+    def _where_of(s: Simulator) -> str:
+        return f"episode {s.episode} at step {s.step}"
 
     def _log_links(self) -> None:
         """Log when a policy (or monitor) joins or leaves: the matched DDS endpoints change."""
@@ -371,15 +446,20 @@ class SimNode(Node):
         return episode
 
     def _stop_ticker(self) -> None:
+        self._resume_ticker = False
         if self._ticker is not None:
             self._keep_lateness(self._ticker)
             self._ticker.stop(join=False)  # it may be waiting for our lock: do not join
             self._ticker = None
 
     def _start_ticker(self) -> None:
-        """A fresh ticker per episode, so every step of it lasts one full period."""
+        """A fresh ticker per episode, so every step of it lasts one full period (not while
+        the node is inactive: activate starts it)."""
         self._stop_ticker()
         self._waiting_since = None
+        if not self.active:
+            self._resume_ticker = True
+            return
         ticker = FixedRateTicker(
             1.0 / self.rate_hz,
             lambda: self._tick(ticker),
@@ -428,6 +508,9 @@ class SimNode(Node):
             self._stop_ticker()
 
     def _publish_state(self) -> None:
+        if not self.active:  # the first episode, made by configure: published on activate
+            self._unpublished = True
+            return
         s = self._sim
         observed = s.observed_state
         self._state_pub.publish(
@@ -456,7 +539,7 @@ class SimNode(Node):
 
     def _path_timer(self) -> None:
         with self._lock:
-            if self._sim.flying and len(self._path) != self._path_sent:
+            if self.active and self._sim.flying and len(self._path) != self._path_sent:
                 self._publish_path()
 
     def _publish_result(self, result: dict[str, Any]) -> None:
@@ -487,6 +570,8 @@ class SimNode(Node):
         source = self._sources.name_of(info) if self._sim.command_source else ""
         cmd = command_from_msg(msg, source)
         with self._lock:
+            if self._sim is None:
+                return
             known = cmd.lander_id in self._sim.counters.foreign_by_lander
             err = self._sim.submit(cmd)
             if (
@@ -510,6 +595,8 @@ class SimNode(Node):
                         f"command rejected ({err[0]}): {err[1]} [{n} rejected so far]"
                     )
                 return
+            if not self.active:
+                return  # held: activate flies it
             if self.lockstep and self._sim.has_fresh_command:
                 self._advance()
             elif self._waiting_since is not None and self._sim.has_fresh_command:
@@ -522,7 +609,11 @@ class SimNode(Node):
 
     def _resend_check(self) -> None:
         with self._lock:
-            if not self._sim.flying or (not self.lockstep and self._waiting_since is None):
+            if (
+                not self.active
+                or not self._sim.flying
+                or (not self.lockstep and self._waiting_since is None)
+            ):
                 return
             now = time.monotonic()
             waited = now - self._waiting_since if self._waiting_since is not None else 0.0
@@ -545,7 +636,9 @@ class SimNode(Node):
     ) -> ResetEpisode.Response:
         response.lander_id = self.lander_id
         why = None
-        if request.lander_id and request.lander_id != self.lander_id:
+        if not self.active:
+            why = f"reset refused: {self.refusal()}"
+        elif request.lander_id and request.lander_id != self.lander_id:
             why = (
                 f"reset refused: it is for lander {request.lander_id!r}, this is {self.lander_id!r}"
             )
@@ -560,7 +653,7 @@ class SimNode(Node):
         if why is not None:
             response.success = False
             response.message = why
-            response.episode = self._sim.episode
+            response.episode = self._sim.episode if self._sim is not None else 0
             self.get_logger().warning(why)
             return response
         state = None

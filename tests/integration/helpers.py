@@ -102,7 +102,7 @@ def fly_shipped_policy_over_ros(tmp_path: Path, make_node, spin_until, sim_param
 
     procs = ProcessSet(tmp_path)
     try:
-        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False, **sim_params})
+        sim = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False, **sim_params})
         policy = procs.node("pd_policy_node", {})
         assert sim.wait_log("simulator ready", START_S), procs.logs()
         assert policy.wait_log("policy ready", START_S), procs.logs()

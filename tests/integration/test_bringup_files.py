@@ -60,8 +60,9 @@ def _stub_launch_modules(monkeypatch) -> None:
         "launch": ["LaunchDescription"],
         "launch.actions": ["DeclareLaunchArgument", "EmitEvent", "LogInfo", "RegisterEventHandler"],
         "launch.event_handlers": ["OnProcessExit", "OnProcessIO"],
+        "launch.conditions": ["IfCondition"],
         "launch.events": ["Shutdown"],
-        "launch.substitutions": ["LaunchConfiguration"],
+        "launch.substitutions": ["LaunchConfiguration", "PythonExpression"],
         "launch_ros": [],
         "launch_ros.actions": ["Node"],
         "launch_ros.parameter_descriptions": ["ParameterValue"],
@@ -87,7 +88,11 @@ def test_launch_file_ends_the_stack_when_a_node_exits(monkeypatch):
     entities = ns["generate_launch_description"]().args[0]
     nodes = [e for e in entities if type(e).__name__ == "Node"]
     handlers = [e.args[0] for e in entities if type(e).__name__ == "RegisterEventHandler"]
-    assert [n.kwargs["name"] for n in nodes] == [SIM, POLICY, OCP]
+    assert [n.kwargs["name"] for n in nodes] == [SIM, POLICY, OCP, "pd_lifecycle_manager"]
+    manager = nodes[-1]
+    assert type(manager.kwargs["condition"]).__name__ == "IfCondition"  # managed:=true only
+    for node in nodes[:3]:  # each node's autostart follows `managed`
+        assert any("autostart" in p for p in node.kwargs["parameters"] if isinstance(p, dict))
     on_io = {
         h.kwargs["target_action"].kwargs["name"]: h for h in handlers if "on_stderr" in h.kwargs
     }

@@ -51,7 +51,7 @@ def test_every_node_reports_on_diagnostics_and_the_bag_draws(tmp_path, make_node
     probe.create_subscription(LanderState, "/lander/state", states.append, qos.LOOP_SUB_QOS)
     probe.create_subscription(EpisodeResult, "/lander/episode", results.append, qos.EPISODE_QOS)
     try:
-        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        sim = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False})
         policy = procs.node("pd_policy_node", {})
         procs.node("pd_ocp_node", {})
         rec = procs.start("pd_record", [executable("pd_bringup", "pd_record"), "-o", str(bag)])
@@ -164,7 +164,7 @@ def test_lockstep_clock_runs_on_across_episodes(tmp_path, make_node, spin_until)
     try:
         sim = procs.node(
             "pd_sim_node",
-            {"lockstep": True, "autostart": False, "auto_restart": True, "max_time_s": 6.0},
+            {"lockstep": True, "start_episode": False, "auto_restart": True, "max_time_s": 6.0},
         )
         policy = procs.node("pd_policy_node", {})
         assert sim.wait_log("simulator ready", START_S), procs.logs()
@@ -183,16 +183,30 @@ def test_lockstep_clock_runs_on_across_episodes(tmp_path, make_node, spin_until)
         assert spin_until(future.done, 30.0) and future.result().success, procs.logs()
         assert spin_until(lambda: len(results) >= 3, 120.0), procs.logs()
         assert sim.stop(timeout_s=30.0) == 0, sim.log()  # nothing is published any more
-        # drain what is queued: on a loaded machine this probe is the slow reader
-        spin_until(lambda: len(odom) >= len(states), 20.0)
-        spin_until(lambda: False, 0.5)
+        # drain what is queued (on a loaded machine this probe is the slow reader) until what
+        # the assertions below need has arrived: each subscription lags on its own, so a bound
+        # on one list (odom >= states held at (321, 54) while the states lagged) is no drain
+        flown = sum(r.time_of_flight for r in results[:3])
+
+        def clock_ran_on() -> bool:
+            return bool(clock) and _seconds(clock[-1]) >= flown + 0.2 * 2 - 1e-6
+
+        def one_odometry_per_state() -> bool:
+            return len(states) - 1 <= len(odom) <= len(states)
+
+        def full_paths() -> bool:
+            return all(_full_paths(paths, r) for r in results[:3])
+
+        drained = spin_until(
+            lambda: clock_ran_on() and one_odometry_per_state() and full_paths(), 60.0
+        )
+        assert drained, (clock_ran_on(), (len(odom), len(states)), full_paths())
     finally:
         procs.stop_all()
 
     # /clock: never goes back, and runs on across episodes (a step between two)
-    t = np.array([c.clock.sec + c.clock.nanosec * 1e-9 for c in clock])
+    t = np.array([_seconds(c) for c in clock])
     assert len(t) > 30 and np.all(np.diff(t) >= 0.0)
-    flown = sum(r.time_of_flight for r in results[:3])
     assert t[-1] >= flown + 0.2 * 2 - 1e-6, (t[-1], flown)
     # a node with use_sim_time is on the simulation clock (tens of seconds here), not the wall
     # clock (~1.7e9 s). Its own /clock subscription may be ahead of the probe's list, which
@@ -209,10 +223,20 @@ def test_lockstep_clock_runs_on_across_episodes(tmp_path, make_node, spin_until)
         assert (o.header.frame_id, o.child_frame_id) == ("landing_site", "lander")
 
     # the path published when an episode ends holds every state of it
+    for r in results[:3]:
+        full = _full_paths(paths, r)
+        assert [len(p.poses) for p in full] == [r.steps + 1], (r, [len(p.poses) for p in paths])
+
+
+def _seconds(c: Clock) -> float:
+    return c.clock.sec + c.clock.nanosec * 1e-9
+
+
+def _full_paths(paths: list[Path], r: EpisodeResult) -> list[Path]:
+    """The paths that end where episode `r` ended (the one published at its end)."""
+
     def end_of(path: Path) -> np.ndarray:
         p = path.poses[-1].pose.position
         return np.array([p.x, p.y, p.z])
 
-    for r in results[:3]:
-        full = [p for p in paths if np.allclose(end_of(p), from_vec3(r.final_position))]
-        assert [len(p.poses) for p in full] == [r.steps + 1], (r, [len(p.poses) for p in paths])
+    return [p for p in paths if p.poses and np.allclose(end_of(p), from_vec3(r.final_position))]

@@ -45,7 +45,7 @@ def test_bad_start_up_parameter_is_one_line(tmp_path, package, params, code, say
 def test_integers_accepted_for_doubles(tmp_path):
     procs = ProcessSet(tmp_path)
     try:
-        sim = procs.node("pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "autostart": False})
+        sim = procs.node("pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "start_episode": False})
         ocp = procs.node("pd_ocp_node", {"timeout_s": 30})
         pol = procs.node("pd_policy_node", {"stats_period_s": 5, "controller": "zemzev"})
         assert sim.wait_log("real time at 10 Hz", START_S), sim.log()
@@ -81,7 +81,7 @@ def test_integers_for_doubles_are_stored_as_doubles(tmp_path, make_node, spin_un
     procs = ProcessSet(tmp_path)
     try:
         sim = procs.node(
-            "pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "seed": 4, "autostart": False}
+            "pd_sim_node", {"rate_hz": 10, "max_time_s": 100, "seed": 4, "start_episode": False}
         )
         assert sim.wait_log("real time at 10 Hz", START_S), sim.log()
         get = make_node("param_probe").create_client(GetParameters, "/pd_sim_node/get_parameters")

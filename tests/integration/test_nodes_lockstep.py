@@ -40,7 +40,7 @@ def stack(tmp_path_factory):
     model = make_model(tmp / "untrained.pt", seed=1)
     procs = ProcessSet(tmp)
     try:
-        sim = procs.node("pd_sim_node", {"lockstep": True, "autostart": False})
+        sim = procs.node("pd_sim_node", {"lockstep": True, "start_episode": False})
         policy = procs.node("pd_policy_node", {"model_path": str(model)})
         assert sim.wait_log("simulator ready", START_S), procs.logs()
         assert policy.wait_log("policy ready", START_S), procs.logs()
@@ -155,8 +155,11 @@ def test_lockstep_landing_equals_offline_rollout(stack, make_node, spin_until):
     def cmds():
         return [c for c in loop.commands if c.episode == episode]
 
-    spin_until(lambda: len(cmds()) >= result.steps, 5.0)
-    assert sorted(c.step for c in cmds()) == list(range(result.steps))
+    def every_step_commanded() -> bool:
+        return sorted(c.step for c in cmds()) == list(range(result.steps))
+
+    spin_until(every_step_commanded, 5.0)
+    assert every_step_commanded(), sorted(c.step for c in cmds())
 
 
 def test_bad_inputs_rejected_and_loop_goes_on(stack, make_node, spin_until):

@@ -317,3 +317,46 @@ def test_tools_take_ros_args_anywhere():
     for bad, says in ((["--ros-args", "-r"], "trailing -r"), (["--ros-args", "x"], "unknown")):
         with pytest.raises(UsageError, match=says):
             split_ros_args("pd_record", bad)
+
+
+def test_a_restarted_simulator_is_recorded_or_counted_to_the_message(
+    tmp_path, make_node, spin_until
+):
+    """Issue 71 item 6: a simulator SIGKILLed mid-episode and started again while pd_record
+    records. A new publisher's first messages go out before DDS matches it with the recorder
+    (reliable, volatile: never sent to a later reader); the recorder counts them from the
+    sequence numbers. Every state of each simulator from step 0 is in the bag or counted."""
+    procs = ProcessSet(tmp_path)
+    bag = tmp_path / "bag"
+    sim = {"rate_hz": 20.0, "start_wait_s": 0.0, "auto_restart": True, "seed": 5}
+    heard: list[LanderState] = []
+    probe = make_node("restart_probe")
+    probe.create_subscription(LanderState, "/lander/state", heard.append, qos.LOOP_SUB_QOS)
+    try:
+        rec = _recorder(procs, bag, "/lander/state")
+        assert rec.wait_log("publishers that appear from now on are new", START_S), rec.log()
+        first = procs.node("pd_sim_node", {**sim, "lander_id": "first"})
+        assert spin_until(lambda: sum(s.lander_id == "first" for s in heard) >= 20, START_S)
+        first.signal_group(signal.SIGKILL)  # mid-episode (a zero-thrust fall lasts ~25 s)
+        assert wait_for(lambda: not first.alive, 10.0)
+        second = procs.node("pd_sim_node", {**sim, "lander_id": "second"}, name="pd_sim_2")
+        assert spin_until(lambda: sum(s.lander_id == "second" for s in heard) >= 40, START_S)
+        assert rec.stop(timeout_s=STOP_S) == 0, rec.log()
+        second.stop()
+    finally:
+        procs.stop_all()
+
+    recorded = deserialize_all(bag)["/lander/state"]
+    skipped = 0
+    for lander in ("first", "second"):
+        steps = [(m.episode, m.step) for m in recorded if m.lander_id == lander]
+        assert steps and steps[0][0] == 1, (lander, steps[:3])
+        start = steps[0][1]  # states of episode 1 before this one never reached the recorder
+        assert steps == [(1, k) for k in range(start, start + len(steps))], lander  # no gap
+        skipped += start
+    missed = re.search(r"/lander/state: \d+(?:, [^,]*)*?, (\d+) missed before", rec.log())
+    said = int(missed.group(1)) if missed else 0
+    assert said == skipped, (said, skipped, rec.log()[-1500:])
+    meta = (bag / "metadata.yaml").read_text()
+    custom = f"/lander/state {skipped}" if skipped else "'0'"
+    assert f"pd_record.missed_before_match: {custom}" in meta, meta

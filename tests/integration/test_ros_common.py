@@ -136,7 +136,7 @@ def test_domain_claims_differ_and_override(monkeypatch):
 
 
 def test_a_hanging_teardown_exits_with_the_status_and_one_line():
-    """The watchdog run_node arms before on_shutdown: a teardown stuck past TEARDOWN_S exits."""
+    """The watchdog run_node arms before the shutdown transition: a stuck teardown exits."""
     code = (
         "import time\n"
         "from pd_ros_common import run\n"

@@ -63,3 +63,23 @@ def test_hostile_pickle_refused_without_running(saved, tmp_path):
     torch.save({"x": Evil()}, saved)
     assert "refused" in refusal(saved)
     assert not marker.exists()
+
+
+def test_a_plain_pickle_is_refused_in_one_line_without_a_torch_warning(saved, tmp_path):
+    """Issue 71 item 7: torch's weights-only unpickler warned about the pickle protocol first."""
+    import pickle
+    import warnings
+
+    marker = tmp_path / "ran"
+
+    class Evil:
+        def __reduce__(self):
+            return (marker.write_text, ("pwned",))
+
+    saved.write_bytes(pickle.dumps(Evil(), protocol=4))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        text = refusal(saved)
+    assert [str(w.message) for w in caught] == []
+    assert "cannot load weights" in text and "\n" not in text
+    assert not marker.exists()

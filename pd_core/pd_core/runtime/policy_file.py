@@ -15,6 +15,7 @@ import json
 import math
 import re
 import subprocess
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -122,7 +123,11 @@ def _load_weights(pt: Path) -> dict[str, Any]:
     import torch  # optional heavy dependency: only loading a policy needs it
 
     try:
-        state = torch.load(pt, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():
+            # A plain pickle makes torch warn (UserWarning, "Detected pickle protocol 4") before
+            # it refuses the file: the refusal below says it all, in one line.
+            warnings.simplefilter("ignore", UserWarning)
+            state = torch.load(pt, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for corrupt or hostile files
         text = str(exc)
         hostile = re.search(r"Unsupported global: GLOBAL (\S+)", text)
