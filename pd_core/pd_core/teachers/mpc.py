@@ -107,6 +107,15 @@ class MPCParams:
     # the default RulesConfig, full thrust delivered): a vertical level the limit would raise
     # is raised here, so the layer and the teacher agree (see `brake_limited`)
     keep_brake_limit: bool = False
+    # ... that limit counting on the mass lost while braking (`RulesConfig.brake_mass_loss`,
+    # issue 68): raise where `brake_limited(..., mass_loss=True)` fires (off: the limit at the
+    # mass now, as every teacher flew before)
+    brake_mass_loss: bool = False
+    # ... and on the fraction of the vertical thrust the runtime layer counts on this step
+    # (`Decision.thrust_gain_bound`: the identified gain, at most `unmeasured_thrust` until
+    # measured), which a `Runtime` hands to an actor that takes it (`take_thrust_fraction`);
+    # off, or flown without the layer: full thrust delivered, as before
+    layer_thrust_fraction: bool = False
     # plans end at rest this high above the pad (a "low gate"): rest exactly on the pad at t_f
     # asks for infinite precision at t_f -> 0, and a plan that brakes at its limit to the
     # ground leaves nothing for the quantisation and the disturbance
@@ -203,6 +212,20 @@ class MPCController:
         # with `warm_lp` each LP also starts from the last one's basis)
         self._highs = LPSolver(warm=self.params.warm_lp)
         self.stats = ReplanStats()
+        # the vertical thrust fraction the layer counts on, per state of the next act_batch
+        # (`take_thrust_fraction`; None: full thrust)
+        self._fraction: np.ndarray | None = None
+
+    @property
+    def takes_thrust_fraction(self) -> bool:
+        """Whether a `Runtime` should hand this controller the fraction of the vertical
+        thrust its layer counts on (`MPCParams.layer_thrust_fraction`)."""
+        return self.params.layer_thrust_fraction
+
+    def take_thrust_fraction(self, fraction: np.ndarray) -> None:
+        """The fraction (B,) of the vertical thrust the runtime layer counts on for each state
+        of the next `act_batch` call (used once, by `keep_brake_limit`)."""
+        self._fraction = np.asarray(fraction, dtype=float).reshape(-1)
 
     def reset(self) -> None:
         """Forget every plan (the next call starts cold)."""
@@ -217,10 +240,13 @@ class MPCController:
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         """Actions (B,) for physical states (B, 7), each continuing the plan it matches."""
         s = check_state(states).reshape(-1, 7)
+        frac, self._fraction = self._fraction, None
+        if frac is None or len(frac) != len(s):
+            frac = np.ones(len(s))
         rows = self._match(s)
         out = np.empty(len(s), dtype=np.int64)
         for i, row in enumerate(rows):
-            out[i] = self._act_row(row, s[i])
+            out[i] = self._act_row(row, s[i], float(frac[i]))
         self._rows = rows  # plans no state continued belong to finished episodes
         return out
 
@@ -252,11 +278,11 @@ class MPCController:
     def first_action(self, state: np.ndarray) -> int:
         """Eq. 5 action of a cold free-final-time plan from `state` (fallback if none), without
         touching the plans of `act_batch`."""
-        return self._act_row(_Row(), check_state(state).reshape(7))
+        return self._act_row(_Row(), check_state(state).reshape(7), 1.0)
 
     # --- one row ---------------------------------------------------------------------------
 
-    def _act_row(self, row: _Row, s: np.ndarray) -> int:
+    def _act_row(self, row: _Row, s: np.ndarray, fraction: float = 1.0) -> int:
         planned = self._plan(row, s)
         if planned is None:
             self.stats.fallback_steps += 1
@@ -265,18 +291,23 @@ class MPCController:
         else:
             action = self._eq5_action(row, s, planned)
         if self.params.keep_brake_limit:
-            action = self._within_brake_limit(s, action)
+            action = self._within_brake_limit(s, action, fraction)
         row.predicted = np.array(step_scalar(tuple(s), tuple(self.thrust(action)), _ZERO, DT_S))
         return action
 
-    def _within_brake_limit(self, s: np.ndarray, action: int) -> int:
+    def _within_brake_limit(self, s: np.ndarray, action: int, fraction: float = 1.0) -> int:
         """The action with its vertical level raised to the lowest one the runtime layer's
-        braking limit lets pass from s (the top level if none does)."""
+        braking limit lets pass from s (the top level if none does), counting on `fraction`
+        of the vertical thrust where `layer_thrust_fraction` (as the layer's rules do: the
+        command and the full thrust both scaled) and on the mass lost while braking where
+        `brake_mass_loss`."""
         levels = self.actions.level_table[action].copy()
         top = self.actions.n_per_axis[2] - 1
+        f = fraction if self.params.layer_thrust_fraction else 1.0
+        mass_loss = self.params.brake_mass_loss
         while levels[2] < top:
             t_z = float(self.actions.levels_to_thrust(levels)[2])
-            if not brake_limited(s, t_z, float(self._hi[2])):
+            if not brake_limited(s, f * t_z, f * float(self._hi[2]), mass_loss=mass_loss):
                 break
             levels[2] += 1
         return int(self.actions.levels_to_action(levels[None])[0])

@@ -5,6 +5,9 @@
 fallback near the pad. `mpc-fuel-reserve` is the fuel teacher that keeps the runtime layer's
 vertical reserve (`reserve_controller`, issue 32); `mpc-fuel-reserve-state`, the training
 recipe's teacher, is the same teacher handing over to its fallback on the state's clock.
+`mpc-fuel-reserve-state-ml` (issue 68) is that teacher quantising within the braking limit that
+counts on the mass lost while braking, on the vertical thrust fraction its runtime layer counts
+on (`RESERVE_STATE_ML_PARAMS`); without a layer it counts on full thrust.
 """
 
 from __future__ import annotations
@@ -42,6 +45,16 @@ RESERVE_PARAMS = MPCParams(
 # plan's time-to-go, so that a student, which sees the state and not the plan, can learn when
 # the end-game starts (docs/experiments/2026-12-02-state-handover.md).
 RESERVE_STATE_PARAMS = replace(RESERVE_PARAMS, handover_from_state=True)
+# `mpc-fuel-reserve-state-ml` (issue 68, item 2): the same, keeping the braking limit that counts
+# on the mass lost while braking (`MPCParams.brake_mass_loss`, the layer's
+# `RulesConfig.brake_mass_loss`) on the vertical thrust fraction the layer counts on this step
+# (`MPCParams.layer_thrust_fraction`: the identified gain, or `unmeasured_thrust` until measured).
+# Fly it behind a layer with the same settings, e.g.
+# `set:brake_mass_loss=1,unmeasured_thrust=0.8:shield:controller:mpc-fuel-reserve-state-ml`
+# (docs/experiments/2026-12-04-teacher-inside-the-new-limit.md).
+RESERVE_STATE_ML_PARAMS = replace(
+    RESERVE_STATE_PARAMS, brake_mass_loss=True, layer_thrust_fraction=True
+)
 
 
 def reserve_controller(
@@ -82,6 +95,9 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
     "mpc-fuel-reserve-state": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS), RESERVE_STATE_PARAMS, "mpc-fuel-reserve-state"
+    ),
+    "mpc-fuel-reserve-state-ml": lambda: reserve_controller(
+        ZemZevController(VERNIER_PARAMS), RESERVE_STATE_ML_PARAMS, "mpc-fuel-reserve-state-ml"
     ),
 }
 CONTROLLERS = tuple(FACTORIES)
