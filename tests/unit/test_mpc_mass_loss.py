@@ -18,6 +18,7 @@ from pd_core.teachers.registry import CONTROLLERS, RESERVE_STATE_PARAMS, make_co
 
 T_MAX_N = float(RL_THRUST.max_n[2])
 ML_NAME = "mpc-fuel-reserve-state-ml"
+PLAN_NAME = "mpc-fuel-reserve-state-ml-plan"
 # 2500 m, 2000 kg: the limit at the mass now is 103.2 m/s, counting on the mass lost while
 # braking 109.4 m/s (docs/experiments/2026-12-04-braking-law-and-beyond.md)
 BETWEEN = np.array([0.0, 0.0, 2500.0, 0.0, 0.0, -106.0, 2000.0])
@@ -33,22 +34,41 @@ def _coast(ctl: MPCController) -> int:
     return int(ctl.actions.levels_to_action(np.array([[mid[0], mid[1], 0]]))[0])
 
 
-def test_new_fields_are_off_in_every_teacher_but_the_ml_one() -> None:
+def test_new_fields_are_off_in_every_teacher_but_the_ml_ones() -> None:
     assert MPCParams().brake_mass_loss is False and MPCParams().layer_thrust_fraction is False
-    assert ML_NAME in CONTROLLERS
+    assert MPCParams().plan_brake_margin_mps is None
+    assert {ML_NAME, PLAN_NAME} <= set(CONTROLLERS)
     for name in CONTROLLERS:
         ctl = make_controller(name)
         if not isinstance(ctl, MPCController):
             continue
-        ml = name == ML_NAME
+        ml = name in (ML_NAME, PLAN_NAME)
         assert ctl.params.brake_mass_loss is ml and ctl.params.layer_thrust_fraction is ml, name
         assert ctl.takes_thrust_fraction is ml
+        assert (ctl._envelope() is not None) is (name == PLAN_NAME), name
     ml = make_controller(ML_NAME)
     assert ml.name == ML_NAME
     # otherwise the recipe's teacher, setting for setting
     assert replace(ml.params, brake_mass_loss=False, layer_thrust_fraction=False) == (
         RESERVE_STATE_PARAMS
     )
+
+
+def test_plan_envelope_is_the_layers_limit_on_the_counted_fraction() -> None:
+    ctl = make_controller(PLAN_NAME)
+    ctl._row_fraction = 0.8
+    env = ctl._envelope()
+    assert env is not None and env.mass_loss and env.margin_mps == pytest.approx(0.35)
+    assert env.gate_m == pytest.approx(ctl.params.gate_altitude_m)
+    # the limit it plans inside is the one the layer's rules check on 80 % of the thrust: from
+    # 2500 m, 2000 kg, a full-thrust step at 0.5 m/s under it passes, a coasting step at 0.5 m/s
+    # over it fires
+    vmax = float(env.limits(np.array([2500.0]), np.array([2000.0]))[0][0])
+    s = BETWEEN.copy()
+    s[5] = -(vmax - 0.5)
+    assert not brake_limited(s, 0.8 * T_MAX_N, 0.8 * T_MAX_N, mass_loss=True)
+    s[5] = -(vmax + 0.5)
+    assert brake_limited(s, 0.0, 0.8 * T_MAX_N, mass_loss=True)
 
 
 def test_mass_loss_teacher_coasts_where_only_the_constant_mass_limit_fires() -> None:
