@@ -144,6 +144,8 @@ class Runtime:
             decided, scale = observed_states(states), _NO_SCALE
         else:
             decided, scale = lat.predict_scaled(states, rows)
+        if getattr(self.actor, "takes_thrust_fraction", False):
+            self.actor.take_thrust_fraction(self._counted_fraction(scale, len(decided)))  # type: ignore[attr-defined]
         proposed = np.ascontiguousarray(self.actor.act_batch(decided), dtype=np.int64).reshape(-1)
         actions, decisions = rules_and_record(
             self._rules, self.fallback, proposed, decided, scale, rows, lat
@@ -157,6 +159,17 @@ class Runtime:
             for k, c in enumerate(np.bincount(source, minlength=len(SOURCES)).tolist()):
                 counts[SOURCES[k]] += c
         return actions, decisions
+
+    def _counted_fraction(self, scale: np.ndarray, n: int) -> np.ndarray:
+        """The vertical thrust fraction (n,) the rules will count on for each row (as
+        `kernels_rules.rules_rows`: the prediction stage's scale clipped to
+        [min_measured_thrust, 1] where `measured_thrust`, else 1), for an actor that plans on it
+        (`takes_thrust_fraction`, e.g. `MPCParams.layer_thrust_fraction`); read only, the rules
+        do not change."""
+        r = self.config.rules
+        if self.latency is None or not r.measured_thrust or len(scale) != n:
+            return np.ones(n)
+        return np.clip(scale, r.min_measured_thrust, 1.0)
 
     def act_rows(self, states: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Actions (B,) for the observed states (B, 7) of rows (B,) (`step_rows` without the

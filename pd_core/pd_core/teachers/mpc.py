@@ -72,7 +72,7 @@ from pd_core.config import (
 )
 from pd_core.discretise import eq5_levels
 from pd_core.dynamics import step_scalar
-from pd_core.ocp.fuel import fuel_lp_plan
+from pd_core.ocp.fuel import BrakeEnvelope, envelope_fuel_plan, fuel_lp_plan
 from pd_core.ocp.lp import LPSolver
 from pd_core.ocp.model import control_times
 from pd_core.ocp.qp import WarmStart, energy_qp_plan
@@ -107,6 +107,19 @@ class MPCParams:
     # the default RulesConfig, full thrust delivered): a vertical level the limit would raise
     # is raised here, so the layer and the teacher agree (see `brake_limited`)
     keep_brake_limit: bool = False
+    # ... that limit counting on the mass lost while braking (`RulesConfig.brake_mass_loss`,
+    # issue 68): raise where `brake_limited(..., mass_loss=True)` fires (off: the limit at the
+    # mass now, as every teacher flew before)
+    brake_mass_loss: bool = False
+    # ... and on the fraction of the vertical thrust the runtime layer counts on this step
+    # (`Decision.thrust_gain_bound`: the identified gain, at most `unmeasured_thrust` until
+    # measured), which a `Runtime` hands to an actor that takes it (`take_thrust_fraction`);
+    # off, or flown without the layer: full thrust delivered, as before
+    layer_thrust_fraction: bool = False
+    # fuel plans keep this far (m/s) inside that braking limit (`ocp.fuel.BrakeEnvelope`,
+    # elastic, on the fraction counted on and, with `brake_mass_loss`, the mass lost while
+    # braking) instead of only quantising inside it; None: off (the plans as before)
+    plan_brake_margin_mps: float | None = None
     # plans end at rest this high above the pad (a "low gate"): rest exactly on the pad at t_f
     # asks for infinite precision at t_f -> 0, and a plan that brakes at its limit to the
     # ground leaves nothing for the quantisation and the disturbance
@@ -203,6 +216,21 @@ class MPCController:
         # with `warm_lp` each LP also starts from the last one's basis)
         self._highs = LPSolver(warm=self.params.warm_lp)
         self.stats = ReplanStats()
+        # the vertical thrust fraction the layer counts on, per state of the next act_batch
+        # (`take_thrust_fraction`; None: full thrust)
+        self._fraction: np.ndarray | None = None
+        self._row_fraction = 1.0  # the fraction of the state being planned from
+
+    @property
+    def takes_thrust_fraction(self) -> bool:
+        """Whether a `Runtime` should hand this controller the fraction of the vertical
+        thrust its layer counts on (`MPCParams.layer_thrust_fraction`)."""
+        return self.params.layer_thrust_fraction
+
+    def take_thrust_fraction(self, fraction: np.ndarray) -> None:
+        """The fraction (B,) of the vertical thrust the runtime layer counts on for each state
+        of the next `act_batch` call (used once, by `keep_brake_limit`)."""
+        self._fraction = np.asarray(fraction, dtype=float).reshape(-1)
 
     def reset(self) -> None:
         """Forget every plan (the next call starts cold)."""
@@ -217,10 +245,13 @@ class MPCController:
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         """Actions (B,) for physical states (B, 7), each continuing the plan it matches."""
         s = check_state(states).reshape(-1, 7)
+        frac, self._fraction = self._fraction, None
+        if frac is None or len(frac) != len(s):
+            frac = np.ones(len(s))
         rows = self._match(s)
         out = np.empty(len(s), dtype=np.int64)
         for i, row in enumerate(rows):
-            out[i] = self._act_row(row, s[i])
+            out[i] = self._act_row(row, s[i], float(frac[i]))
         self._rows = rows  # plans no state continued belong to finished episodes
         return out
 
@@ -252,11 +283,12 @@ class MPCController:
     def first_action(self, state: np.ndarray) -> int:
         """Eq. 5 action of a cold free-final-time plan from `state` (fallback if none), without
         touching the plans of `act_batch`."""
-        return self._act_row(_Row(), check_state(state).reshape(7))
+        return self._act_row(_Row(), check_state(state).reshape(7), 1.0)
 
     # --- one row ---------------------------------------------------------------------------
 
-    def _act_row(self, row: _Row, s: np.ndarray) -> int:
+    def _act_row(self, row: _Row, s: np.ndarray, fraction: float = 1.0) -> int:
+        self._row_fraction = fraction if self.params.layer_thrust_fraction else 1.0
         planned = self._plan(row, s)
         if planned is None:
             self.stats.fallback_steps += 1
@@ -265,21 +297,40 @@ class MPCController:
         else:
             action = self._eq5_action(row, s, planned)
         if self.params.keep_brake_limit:
-            action = self._within_brake_limit(s, action)
+            action = self._within_brake_limit(s, action, fraction)
         row.predicted = np.array(step_scalar(tuple(s), tuple(self.thrust(action)), _ZERO, DT_S))
         return action
 
-    def _within_brake_limit(self, s: np.ndarray, action: int) -> int:
+    def _within_brake_limit(self, s: np.ndarray, action: int, fraction: float = 1.0) -> int:
         """The action with its vertical level raised to the lowest one the runtime layer's
-        braking limit lets pass from s (the top level if none does)."""
+        braking limit lets pass from s (the top level if none does), counting on `fraction`
+        of the vertical thrust where `layer_thrust_fraction` (as the layer's rules do: the
+        command and the full thrust both scaled) and on the mass lost while braking where
+        `brake_mass_loss`."""
         levels = self.actions.level_table[action].copy()
         top = self.actions.n_per_axis[2] - 1
+        f = fraction if self.params.layer_thrust_fraction else 1.0
+        mass_loss = self.params.brake_mass_loss
         while levels[2] < top:
             t_z = float(self.actions.levels_to_thrust(levels)[2])
-            if not brake_limited(s, t_z, float(self._hi[2])):
+            if not brake_limited(s, f * t_z, f * float(self._hi[2]), mass_loss=mass_loss):
                 break
             levels[2] += 1
         return int(self.actions.levels_to_action(levels[None])[0])
+
+    def _envelope(self) -> BrakeEnvelope | None:
+        """The braking limit the fuel plans keep inside (`plan_brake_margin_mps`), or None."""
+        p = self.params
+        if p.plan_brake_margin_mps is None:
+            return None
+        return BrakeEnvelope(
+            thrust_margin=BRAKE_MARGIN * self._row_fraction,
+            max_vertical_thrust_n=float(self._hi[2]),
+            land_speed_mps=LAND_SPEED_MPS,
+            margin_mps=p.plan_brake_margin_mps,
+            gate_m=p.gate_altitude_m,
+            mass_loss=p.brake_mass_loss,
+        )
 
     def _to_gate(self, s: np.ndarray) -> np.ndarray:
         """The state relative to the gate the plans aim at (rest, gate_altitude_m up)."""
@@ -368,6 +419,7 @@ class MPCController:
                 self.params.passes,
                 self._highs,
                 self.params.floor_every,
+                envelope=self._envelope(),
                 lateral_settle_s=self.params.lateral_settle_s,
             )
         if plan is None:
@@ -387,25 +439,33 @@ class MPCController:
         res = ocp.solve_problem(pb)
         if not res.success or res.time_of_flight < self.params.terminal_time_s:
             return None  # no plan, or close enough to the pad for the fallback
-        p, g = res.thrust, pb.grid(res.time_of_flight)
+        p, t_f = res.thrust, res.time_of_flight
+        env = self._envelope()
+        if env is not None:
+            # a plan inside the limit needs more time than the unreserved optimum: t_f searched
+            # with the envelope (`envelope_fuel_plan`); none found: the unreserved plan
+            inside = envelope_fuel_plan(pb, p, t_f, env, self._highs, self.params.floor_every)
+            if inside is not None:
+                p, t_f = inside
+        g = pb.grid(t_f)
         settle = self.params.lateral_settle_s
         if self.params.objective == "fuel" and (self.params.floor_every or settle):
             # the free-t_f fuel optimum may dive below the gate, and brakes its horizontal
             # motion last: LP passes with the floor and the settle
             p = fuel_lp_plan(
-                pb, g, p, 3, self._highs, self.params.floor_every, lateral_settle_s=settle
+                pb, g, p, 3, self._highs, self.params.floor_every, self._envelope(), settle
             )
             if p is None:
                 return None
         if pb.altitudes(pb.fly(p, g), g).min() < -self.params.underground_m:
             return None
-        n = self._n_control(res.time_of_flight)
+        n = self._n_control(t_f)
         if n != n0:  # resample the plan to the size warm re-plans will use
-            old_t = control_times(res.time_of_flight, n0)
-            new_t = control_times(res.time_of_flight, n)
+            old_t = control_times(t_f, n0)
+            new_t = control_times(t_f, n)
             p = np.column_stack([np.interp(new_t, old_t, p[:, a]) for a in range(3)])
-        row.p, row.t_go, row.active = p, res.time_of_flight, None
-        return p, res.time_of_flight
+        row.p, row.t_go, row.active = p, t_f, None
+        return p, t_f
 
     def _eq5_action(self, row: _Row, s: np.ndarray, plan: tuple[np.ndarray, float]) -> int:
         """Eq. 5: a* of the plan's first step, rounded by the sign of dv = v*_{t+1} - v_t.

@@ -5,6 +5,10 @@
 fallback near the pad. `mpc-fuel-reserve` is the fuel teacher that keeps the runtime layer's
 vertical reserve (`reserve_controller`, issue 32); `mpc-fuel-reserve-state`, the training
 recipe's teacher, is the same teacher handing over to its fallback on the state's clock.
+`mpc-fuel-reserve-state-ml` (issue 68) is that teacher quantising within the braking limit that
+counts on the mass lost while braking, on the vertical thrust fraction its runtime layer counts
+on (`RESERVE_STATE_ML_PARAMS`); without a layer it counts on full thrust.
+`mpc-fuel-reserve-state-ml-plan` also plans inside that limit (`RESERVE_STATE_ML_PLAN_PARAMS`).
 """
 
 from __future__ import annotations
@@ -42,6 +46,24 @@ RESERVE_PARAMS = MPCParams(
 # plan's time-to-go, so that a student, which sees the state and not the plan, can learn when
 # the end-game starts (docs/experiments/2026-12-02-state-handover.md).
 RESERVE_STATE_PARAMS = replace(RESERVE_PARAMS, handover_from_state=True)
+# `mpc-fuel-reserve-state-ml` (issue 68, item 2): the same, keeping the braking limit that counts
+# on the mass lost while braking (`MPCParams.brake_mass_loss`, the layer's
+# `RulesConfig.brake_mass_loss`) on the vertical thrust fraction the layer counts on this step
+# (`MPCParams.layer_thrust_fraction`: the identified gain, or `unmeasured_thrust` until measured).
+# Fly it behind a layer with the same settings, e.g.
+# `set:brake_mass_loss=1,unmeasured_thrust=0.8:shield:controller:mpc-fuel-reserve-state-ml`
+# (docs/experiments/2026-12-04-teacher-inside-the-new-limit.md).
+RESERVE_STATE_ML_PARAMS = replace(
+    RESERVE_STATE_PARAMS, brake_mass_loss=True, layer_thrust_fraction=True
+)
+# `mpc-fuel-reserve-state-ml-plan`: the same whose fuel plans also keep 0.35 m/s inside that
+# limit (`MPCParams.plan_brake_margin_mps`; the floor's middle margin, chosen before flying it),
+# with 3 LP passes per warm re-plan (the envelope's rows are linearised at the shifted plan: with
+# one pass the flights cost 1.41x, with three 1.07x; docs/experiments/
+# 2026-12-04-teacher-inside-the-new-limit.md)
+RESERVE_STATE_ML_PLAN_PARAMS = replace(
+    RESERVE_STATE_ML_PARAMS, plan_brake_margin_mps=0.35, passes=3
+)
 
 
 def reserve_controller(
@@ -82,6 +104,14 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
     "mpc-fuel-reserve-state": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS), RESERVE_STATE_PARAMS, "mpc-fuel-reserve-state"
+    ),
+    "mpc-fuel-reserve-state-ml": lambda: reserve_controller(
+        ZemZevController(VERNIER_PARAMS), RESERVE_STATE_ML_PARAMS, "mpc-fuel-reserve-state-ml"
+    ),
+    "mpc-fuel-reserve-state-ml-plan": lambda: reserve_controller(
+        ZemZevController(VERNIER_PARAMS),
+        RESERVE_STATE_ML_PLAN_PARAMS,
+        "mpc-fuel-reserve-state-ml-plan",
     ),
 }
 CONTROLLERS = tuple(FACTORIES)
