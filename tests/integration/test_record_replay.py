@@ -337,6 +337,9 @@ def test_a_restarted_simulator_is_recorded_or_counted_to_the_message(
         assert rec.wait_log("publishers that appear from now on are new", START_S), rec.log()
         first = procs.node("pd_sim_node", {**sim, "lander_id": "first"})
         assert spin_until(lambda: sum(s.lander_id == "first" for s in heard) >= 20, START_S)
+        # the assertions need the recorder matched with the first simulator before it dies (a
+        # publisher killed before it matched is never seen, so nothing of it can be counted)
+        assert spin_until(lambda: "first message on /lander/state" in rec.log(), START_S)
         first.signal_group(signal.SIGKILL)  # mid-episode (a zero-thrust fall lasts ~25 s)
         assert wait_for(lambda: not first.alive, 10.0)
         second = procs.node("pd_sim_node", {**sim, "lander_id": "second"}, name="pd_sim_2")
