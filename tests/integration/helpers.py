@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from pd_core.config import TABLE3
+from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
+from pd_ros_common import qos
 from pd_ros_common.process import Child as NodeProcess
 from pd_ros_common.process import Supervisor as ProcessSet
 from pd_ros_common.process import executable, ros_args, wait_for
@@ -127,3 +129,17 @@ def fly_shipped_policy_over_ros(tmp_path: Path, make_node, spin_until, sim_param
         return next(r for r in results if r.episode == episode), policy.log()
     finally:
         procs.stop_all()
+
+
+class LoopListener:
+    """What one probe node hears of the control loop: states, commands and episode results
+    (each list appended to as messages arrive), on the stack's QoS."""
+
+    def __init__(self, node) -> None:
+        self.states: list[LanderState] = []
+        self.commands: list[ThrustCommand] = []
+        self.results: list[EpisodeResult] = []
+        sub = node.create_subscription
+        sub(LanderState, "/lander/state", self.states.append, qos.LOOP_SUB_QOS)
+        sub(ThrustCommand, "/lander/thrust_cmd", self.commands.append, qos.LOOP_SUB_QOS)
+        sub(EpisodeResult, "/lander/episode", self.results.append, qos.EPISODE_QOS)

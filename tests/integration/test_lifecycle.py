@@ -19,14 +19,13 @@ import signal
 import subprocess
 
 import pytest
-from helpers import ProcessSet, executable
+from helpers import LoopListener, ProcessSet, executable
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetAvailableTransitions, GetState
 
 from pd_core import lifecycle as lc
-from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ComputeTrajectory, ResetEpisode
-from pd_ros_common import diagnostics, qos
+from pd_ros_common import diagnostics
 from pd_ros_common.convert import reset_request
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
@@ -83,13 +82,8 @@ class Probe:
     def __init__(self, make_node, spin_until, service_ready, targets: list[str]) -> None:
         self.node = make_node("lifecycle_probe")
         self.spin_until = spin_until
-        self.states: list[LanderState] = []
-        self.commands: list[ThrustCommand] = []
-        self.results: list[EpisodeResult] = []
-        sub = self.node.create_subscription
-        sub(LanderState, "/lander/state", self.states.append, qos.LOOP_SUB_QOS)
-        sub(ThrustCommand, "/lander/thrust_cmd", self.commands.append, qos.LOOP_SUB_QOS)
-        sub(EpisodeResult, "/lander/episode", self.results.append, qos.EPISODE_QOS)
+        heard = LoopListener(self.node)
+        self.states, self.commands, self.results = heard.states, heard.commands, heard.results
         self.diagnostics = diagnostics.Listener(self.node)
         self.lc = {t: Lifecycle(self.node, spin_until, t) for t in targets}
         for t, c in self.lc.items():

@@ -6,17 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import ProcessSet
+from helpers import LoopListener, ProcessSet
 
 from pd_core.env import PoweredDescentEnv
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.registry import make_controller
-from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_policy_node.node import default_model_path
-from pd_ros_common import qos
 from pd_ros_common.convert import final_state, reset_request
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
@@ -40,13 +38,8 @@ class Loop:
     def __init__(self, make_node, spin_until):
         self.node = make_node("controller_probe")
         self.spin_until = spin_until
-        self.states: list[LanderState] = []
-        self.commands: list[ThrustCommand] = []
-        self.results: list[EpisodeResult] = []
-        sub = self.node.create_subscription
-        sub(LanderState, "/lander/state", self.states.append, qos.LOOP_SUB_QOS)
-        sub(ThrustCommand, "/lander/thrust_cmd", self.commands.append, qos.LOOP_SUB_QOS)
-        sub(EpisodeResult, "/lander/episode", self.results.append, qos.EPISODE_QOS)
+        heard = LoopListener(self.node)
+        self.states, self.commands, self.results = heard.states, heard.commands, heard.results
         self.reset_cli = self.node.create_client(ResetEpisode, "/sim/reset")
         assert spin_until(self.reset_cli.service_is_ready, 20.0)
 
