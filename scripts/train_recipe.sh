@@ -14,6 +14,15 @@
 #      The recipe's policy is stage 2's best.pt. Wall time on two cores, alone: 59 min
 #      (seed 3, docs/experiments/2026-12-02-three-seeds-and-teacher-campaign.md).
 #
+# --adapt (issue 68) adds a third stage to the ocp recipe:
+#   3. `ocp-adapt` preset from stage 2's best.pt: the network also sees the thrust fraction its
+#      layer counts on (widened with zero weights), behind the layer that counts on the mass lost
+#      while braking and on 80 % thrust until the engine is measured, and the teacher
+#      mpc-fuel-reserve-state-ml; under `adapt` (`broad` with weak engines and navigation
+#      biases): 500 teacher episodes and seven DAgger rounds as stage 2. Its policy is
+#      DIR/stage3/best.pt. --stage2 FILE starts it from FILE (e.g. models/pd_dqn_ocp.pt, stage 2
+#      of seed 1) and skips stages 1 and 2.
+#
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
 #   mpc-fuel-reserve-state  the recipe above (default);
@@ -41,6 +50,7 @@ set -euo pipefail
 usage() {
     cat <<'EOF'
 usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
+                              [--adapt] [--stage2 FILE.pt]
                               [--teacher zemzev-vernier|ocp] [--demonstrator D] [--threads N]
                               [--dry-run] [-h]
 
@@ -48,6 +58,10 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
   --out DIR        run directories DIR/stage1, DIR/stage2 (default runs/ocp__S;
                    --teacher zemzev-vernier: DIR/stage1..3, default runs/recipe__S)
   --stage1 FILE    skip stage 1 and start stage 2 from this policy
+  --adapt          with --teacher ocp: a third stage, `ocp-adapt` (issue 68: the thrust input,
+                   the mass-loss limit, 80 % until measured, weak engines and navigation
+                   biases); the policy is DIR/stage3/best.pt
+  --stage2 FILE    with --adapt: skip stages 1 and 2 and start stage 3 from this policy
   --teacher T      ocp (default: the optimal-control teacher's recipe above, demonstrations
                    then aggregated DAgger rounds; the policy is DIR/stage2/best.pt) or
                    zemzev-vernier (the older ZEM/ZEV-lineage recipe; the policy is
@@ -76,6 +90,8 @@ EOF
 seed=1
 out=""
 stage1=""
+stage2=""
+adapt=0
 dry=0
 threads=2
 teacher=ocp
@@ -88,6 +104,8 @@ while [[ $# -gt 0 ]]; do
         --seed) seed="${2:?--seed needs a value}"; shift 2 ;;
         --out) out="${2:?--out needs a directory}"; shift 2 ;;
         --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
+        --stage2) stage2="${2:?--stage2 needs a policy file}"; shift 2 ;;
+        --adapt) adapt=1; shift ;;
         --paper-inputs) near_pad=(); shift ;;
         --teacher) teacher="${2:?--teacher needs zemzev-vernier or ocp}"; shift 2 ;;
         --demonstrator) demonstrator="${2:?--demonstrator needs a value}"; shift 2 ;;
@@ -99,6 +117,9 @@ done
 [[ "$threads" =~ ^[1-9][0-9]*$ ]] || { echo "train_recipe.sh: --threads must be a positive integer, got '$threads'" >&2; exit 2; }
 [[ "$seed" =~ ^[0-9]+$ ]] || { echo "train_recipe.sh: --seed must be a non-negative integer, got '$seed'" >&2; exit 2; }
 [[ -z "$stage1" || -f "$stage1" ]] || { echo "train_recipe.sh: --stage1 file not found: $stage1" >&2; exit 2; }
+[[ -z "$stage2" || -f "$stage2" ]] || { echo "train_recipe.sh: --stage2 file not found: $stage2" >&2; exit 2; }
+[[ -z "$stage2" ]] || ((adapt)) || { echo "train_recipe.sh: --stage2 needs --adapt" >&2; exit 2; }
+((adapt == 0)) || [[ "$teacher" == ocp && "$demonstrator" == "$recipe_teacher" ]] || { echo "train_recipe.sh: --adapt needs --teacher ocp and the recipe's demonstrator" >&2; exit 2; }
 [[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
 case "$demonstrator" in
     mpc-fuel-reserve-state | mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
@@ -155,11 +176,19 @@ fi
 if [[ "$teacher" == ocp ]]; then
     arm=()
     [[ "$demonstrator" != "$recipe_teacher" ]] && arm=(--controller "$demonstrator")
-    if [[ -z "$stage1" ]]; then
-        stage stage1 --preset ocp "${arm[@]}"
-        stage1="$out/stage1/best.pt"
+    if [[ -z "$stage2" ]]; then
+        if [[ -z "$stage1" ]]; then
+            stage stage1 --preset ocp "${arm[@]}"
+            stage1="$out/stage1/best.pt"
+        fi
+        stage stage2 --preset ocp-dagger "${arm[@]}" --init-policy "$stage1"
+        stage2="$out/stage2/best.pt"
     fi
-    stage stage2 --preset ocp-dagger "${arm[@]}" --init-policy "$stage1"
+    if ((adapt)); then
+        stage stage3 --preset ocp-adapt --init-policy "$stage2"
+        ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/best.pt"
+        exit 0
+    fi
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage2/best.pt"
     exit 0
 fi

@@ -135,6 +135,10 @@ STATE_SCALE = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.005])  # Eq. 21
 # the student disagreed with its teacher on 41 % of the lateral choices of the last 5 m
 # (models/pd_dqn_robust.md, "Near-pad inputs")
 NEAR_PAD_SCALE = np.array([2.0, 2.0, 10.0, 0.5, 0.5, 2.0])
+# ours (issue 68): span of the thrust input a network may add to Eq. 21, the vertical thrust
+# fraction the runtime layer counts on, as (1 - fraction) / span: 0 on a nominal engine, 1 on the
+# weakest engine promised (80 %); pd_core.state.thrust_input
+THRUST_INPUT_SPAN = 0.2
 
 # --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
 

@@ -251,13 +251,37 @@ BROAD_EXTRA = (
     ),
 )
 SCENARIOS.update({d.name: d for d in BROAD_EXTRA})
-CAMPAIGNS = {"standard": STANDARD, "broad": STANDARD + tuple(d.name for d in BROAD_EXTRA)}
+# Training only (ours, issue 68): `broad` plus what a policy must adapt to rather than ride out,
+# an engine weaker than commanded (one factor, from ignition or from a random time) and a
+# constant navigation bias, alone and together. The judged `beyond` campaign (data/beyond.yaml)
+# draws the same kinds on its own seeds.
+ADAPT_EXTRA = (
+    Dispersions("engine-weak", thrust_factor=(0.8, 1.0)),
+    Dispersions("engine-weak-late", thrust_factor=(0.8, 1.0), thrust_factor_onset_s=(5.0, 40.0)),
+    Dispersions("nav-bias-5", nav_position_bias_m=5.0, nav_velocity_bias_mps=0.2),
+    Dispersions(
+        "adapt-all",
+        thrust_factor=(0.85, 1.0),
+        thrust_factor_onset_s=(0.0, 30.0),
+        nav_position_bias_m=3.0,
+        nav_velocity_bias_mps=0.1,
+        mass_kg=(1800.0, 2200.0),
+        delay_steps=1,
+        disturbance_scale=2.0,
+    ),
+)
+SCENARIOS.update({d.name: d for d in ADAPT_EXTRA})
+CAMPAIGNS = {
+    "standard": STANDARD,
+    "broad": STANDARD + tuple(d.name for d in BROAD_EXTRA),
+    "adapt": STANDARD + tuple(d.name for d in BROAD_EXTRA + ADAPT_EXTRA),
+}
 
 
 def load_scenarios(spec: str) -> list[Dispersions]:
     """Scenarios of `spec`: a name of SCENARIOS, a comma-separated list of them, a campaign of
     CAMPAIGNS (`standard`: the ten judged scenarios; `broad`: those and harsher ones, for
-    training) or a YAML file.
+    training; `adapt`: `broad` with a weak engine and a navigation bias) or a YAML file.
 
     YAML: either one scenario (a mapping of Dispersions fields) or `scenarios:` a list whose items
     are scenario names or mappings (a mapping with `base: <name>` starts from that scenario).

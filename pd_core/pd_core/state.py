@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pd_core.config import NEAR_PAD_SCALE, STATE_SCALE
+from pd_core.config import NEAR_PAD_SCALE, STATE_SCALE, THRUST_INPUT_SPAN
 
 # Plausibility bounds for states coming from outside (nodes, files, users): far beyond anything
 # the lander flies, tight enough to catch unit mix-ups and garbage.
@@ -18,6 +18,23 @@ STATE_LIMITS = np.array([MAX_ABS_POSITION_M, MAX_ABS_VELOCITY_MPS, MAX_MASS_KG])
 def scale_state(state: np.ndarray) -> np.ndarray:
     """Network input of Eq. 20: [x, v, m] * s_scale (Eq. 21), float32."""
     return (np.asarray(state, dtype=float) * STATE_SCALE).astype(np.float32)
+
+
+def thrust_input(fraction: np.ndarray | float) -> np.ndarray:
+    """The network's thrust input of a delivered vertical thrust fraction (..., dimensionless):
+    (1 - fraction) / THRUST_INPUT_SPAN, float32; 0 for a nominal engine."""
+    return ((1.0 - np.asarray(fraction, dtype=float)) / THRUST_INPUT_SPAN).astype(np.float32)
+
+
+def scale_inputs(rows: np.ndarray) -> np.ndarray:
+    """Network inputs of physical rows (..., 7) or (..., 8): Eq. 20's scaled state, then, for an
+    8th column (the thrust fraction counted on, `thrust_input`), its thrust input; float32."""
+    r = np.asarray(rows, dtype=float)
+    if r.shape[-1] == 7:
+        return scale_state(r)
+    if r.shape[-1] != 8:
+        raise ValueError(f"expected rows of 7 state values or 8 with a thrust fraction: {r.shape}")
+    return np.concatenate([scale_state(r[..., :7]), thrust_input(r[..., 7:])], axis=-1)
 
 
 # gains on the Eq. 21-scaled position and velocity that give tanh(state / NEAR_PAD_SCALE)

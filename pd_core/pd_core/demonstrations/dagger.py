@@ -30,6 +30,7 @@ from pd_core.config import DT_S
 from pd_core.demonstrations.teacher_flown import map_chunks
 from pd_core.env import transition
 from pd_core.experiments.evaluate import rollout
+from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.registry import make_controller
 
@@ -37,7 +38,11 @@ LABEL_CHUNK_EPISODES = 25  # ours: episodes per pool task (as the demonstrations
 
 
 class ShadowTeacher:
-    """Actor that flies the student's actions and records the teacher's on the same states."""
+    """Actor that flies the student's actions and records the teacher's on the same states,
+    and the vertical thrust fraction the runtime layer counts on for them (handed on to the
+    student and the teacher where they take it: `Runtime.step_rows`)."""
+
+    takes_thrust_fraction = True
 
     def __init__(
         self, student: Any, teacher: Any, noise: float = 0.0, rng: np.random.Generator | None = None
@@ -51,9 +56,19 @@ class ShadowTeacher:
         self.labels: list[np.ndarray] = []
         self.proposed: list[np.ndarray] = []
         self.flown: list[np.ndarray] = []
+        self.fractions: list[np.ndarray] = []
+        self._fraction: np.ndarray | None = None
+
+    def take_thrust_fraction(self, fraction: np.ndarray) -> None:
+        self._fraction = np.array(fraction, dtype=float).reshape(-1)
+        for actor in (self.student, self.teacher):
+            if getattr(actor, "takes_thrust_fraction", False):
+                actor.take_thrust_fraction(self._fraction)
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         s = np.array(states, dtype=float).reshape(-1, 7)
+        f, self._fraction = self._fraction, None
+        self.fractions.append(f if f is not None and len(f) == len(s) else np.ones(len(s)))
         own = np.asarray(self.student.act_batch(s), dtype=np.int64).reshape(-1)
         self.states.append(s)
         self.labels.append(np.asarray(self.teacher.act_batch(s), dtype=np.int64).reshape(-1))
@@ -66,10 +81,20 @@ class ShadowTeacher:
 
 
 def _label_chunk(
-    policy_path: str, teacher: str, n: int, seed: int, dispersions: Any, noise: float = 0.0
+    policy_path: str,
+    teacher: str,
+    n: int,
+    seed: int,
+    dispersions: Any,
+    noise: float = 0.0,
+    layer_settings: str = "",
 ) -> dict[str, np.ndarray]:
-    """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer."""
+    """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer
+    (with `layer_settings` changed)."""
     runtime = load_policy(policy_path, shield="always")
+    if layer_settings:
+        config = runtime.config.with_settings(layer_settings)
+        runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
     rng = np.random.default_rng(seed)
     shadow = ShadowTeacher(runtime.actor, make_controller(teacher), noise, rng)
     runtime.actor = shadow
@@ -79,6 +104,7 @@ def _label_chunk(
         "labels": np.concatenate(shadow.labels),
         "proposed": np.concatenate(shadow.proposed),
         "flown": np.concatenate(shadow.flown),
+        "fraction": np.concatenate(shadow.fractions),
         "landed": ro.landed,
     }
 
@@ -93,32 +119,50 @@ def student_labels(
     chunk: int = LABEL_CHUNK_EPISODES,
     address: str = "",
     noise: float = 0.0,
+    layer_settings: str = "",
 ) -> dict[str, np.ndarray]:
     """The teacher's labels on the states the student at `policy_path` decides on over
     episodes 0..n_episodes-1 (env seed seed + i, disturbances on, under `dispersions`):
     states (N, 7), labels (N,) the teacher's actions, proposed (N,) the network's own, flown
-    (N,) the student's (its own, or random with `noise`) before its runtime layer, landed
-    (n_episodes,) the student's outcomes. `workers` None = every core; `address`: on Ray
-    there instead (`map_chunks`); `noise`: the share of steps flown with a random action."""
+    (N,) the student's (its own, or random with `noise`) before its runtime layer, fraction
+    (N,) the vertical thrust fraction that layer counted on, landed (n_episodes,) the
+    student's outcomes. `workers` None = every core; `address`: on Ray there instead
+    (`map_chunks`); `noise`: the share of steps flown with a random action; `layer_settings`:
+    the student's layer changed from the default (`RuntimeConfig.with_settings`)."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     if not 0.0 <= noise < 1.0:
         raise ValueError(f"noise must be in [0, 1), got {noise}")
     make_controller(teacher)  # an unknown name fails here, in the caller's process
     tasks = [
-        (policy_path, teacher, min(chunk, n_episodes - k), seed + k, dispersions, noise)
+        (
+            policy_path,
+            teacher,
+            min(chunk, n_episodes - k),
+            seed + k,
+            dispersions,
+            noise,
+            layer_settings,
+        )
         for k in range(0, n_episodes, chunk)
     ]
     parts = map_chunks(_label_chunk, tasks, workers, address)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def label_transitions(states: np.ndarray, labels: np.ndarray) -> dict[str, np.ndarray]:
+def label_transitions(
+    states: np.ndarray, labels: np.ndarray, fraction: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """One-step demonstrations of labels: states (N, 7), actions, next_states through the
-    nominal dynamics with no disturbance, dones (touchdown) and one episode id per label."""
+    nominal dynamics with no disturbance, dones (touchdown) and one episode id per label.
+    With `fraction` (N,) the states and next states carry it as an 8th column (the thrust
+    fraction counted on, the same one step later)."""
     s = np.asarray(states, dtype=float).reshape(-1, 7)
     a = np.asarray(labels, dtype=np.int64).reshape(-1)
     nxt, _r, done, _ok = transition(s, DEFAULT_ACTIONS.thrust(a), np.zeros((len(a), 3)), DT_S)
+    if fraction is not None:
+        f = np.asarray(fraction, dtype=float).reshape(-1, 1)
+        s, nxt = np.hstack([s, f]), np.hstack([nxt, f])
     return {
         "states": s,
         "actions": a,

@@ -70,6 +70,38 @@ def rollout_steps(ro: Rollouts, first_episode: int = 0) -> dict[str, np.ndarray]
     }
 
 
+class FractionRecorder:
+    """An actor that flies `inner` and records, step by step, the vertical thrust fraction the
+    runtime layer counts on for the rows it is asked about (`Runtime.step_rows` hands it over
+    before each `act_batch`; passed on to an `inner` that takes it too)."""
+
+    takes_thrust_fraction = True
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.name = getattr(inner, "name", "controller")
+        self.steps: list[np.ndarray] = []
+
+    def take_thrust_fraction(self, fraction: np.ndarray) -> None:
+        self.steps.append(np.array(fraction, dtype=float).reshape(-1))
+        if getattr(self.inner, "takes_thrust_fraction", False):
+            self.inner.take_thrust_fraction(fraction)
+
+    def act_batch(self, states: np.ndarray) -> np.ndarray:
+        return self.inner.act_batch(states)
+
+    def per_episode(self, lengths: Sequence[int]) -> list[np.ndarray]:
+        """The fractions of each episode (T_i,) of a `fly_episodes` batch whose episodes flew
+        `lengths` steps: at step t the actor is asked about the episodes still flying, in
+        order (those with more than t steps)."""
+        lengths = np.asarray(lengths)
+        out = [np.empty(int(t)) for t in lengths]
+        for t, f in enumerate(self.steps):
+            for j, i in enumerate(np.flatnonzero(lengths > t)):
+                out[i][t] = f[j]
+        return out
+
+
 def _fly_chunk(
     controller: str,
     n: int,
@@ -79,20 +111,30 @@ def _fly_chunk(
     initial_states: np.ndarray | None,
     episode_seeds: np.ndarray | None = None,
     behind_layer: bool = False,
+    layer_settings: str = "",
 ) -> dict[str, np.ndarray]:
     """Transitions of episodes first_episode .. + n - 1 (env seeds seed .., or episode_seeds)
-    of a fresh controller (behind the default runtime layer if `behind_layer`)."""
+    of a fresh controller (behind the default runtime layer if `behind_layer`, with
+    `layer_settings` changed; then with "fraction", the thrust fraction the layer counted on at
+    each step)."""
     ctl = make_controller(controller)
+    recorder = FractionRecorder(ctl) if behind_layer and layer_settings else None
+    config = RuntimeConfig().with_settings(layer_settings) if layer_settings else RuntimeConfig()
+    actor = recorder or ctl
     ro = rollout(
-        Runtime(ctl, RuntimeConfig()) if behind_layer else ctl,
+        Runtime(actor, config) if behind_layer else ctl,
         n,
         seed,
         keep_trajectories=n,
         initial_states=initial_states,
         dispersions=dispersions,
         episode_seeds=episode_seeds,
+        chunk=n,
     )
-    return rollout_steps(ro, first_episode)
+    out = rollout_steps(ro, first_episode)
+    if recorder is not None:
+        out["fraction"] = np.concatenate(recorder.per_episode([len(a) for a in ro.actions]))
+    return out
 
 
 def controller_demonstrations(
@@ -107,6 +149,7 @@ def controller_demonstrations(
     episode_seeds: np.ndarray | None = None,
     behind_layer: bool = False,
     address: str = "",
+    layer_settings: str = "",
 ) -> dict[str, np.ndarray]:
     """Physical 1-step transitions of a controller of `pd_core.teachers.zemzev` (the MPC teacher
     `mpc-fuel`/`mpc-energy`, or `zemzev`) flying episodes 0..n_episodes-1 (episode i: env seed
@@ -115,8 +158,10 @@ def controller_demonstrations(
     `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
     `pd_core.experiments.evaluate.rollout`; `workers` None = every core. `behind_layer`: the
     controller flies behind the default runtime layer (`pd_core.runtime.Runtime`), as a
-    student trained on the demonstrations will fly: the actions are the ones flown. `address`:
-    the chunks run on Ray there instead (`map_chunks`)."""
+    student trained on the demonstrations will fly: the actions are the ones flown;
+    `layer_settings` change that layer (`RuntimeConfig.with_settings`) and add "fraction" (N,),
+    the vertical thrust fraction it counted on at each step. `address`: the chunks run on Ray
+    there instead (`map_chunks`)."""
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     make_controller(controller)  # an unknown name fails here, in the caller's process
@@ -131,6 +176,7 @@ def controller_demonstrations(
             None if init is None else init[k : k + chunk],
             None if episode_seeds is None else np.asarray(episode_seeds)[k : k + chunk],
             behind_layer,
+            layer_settings,
         )
         for k in range(0, n_episodes, chunk)
     ]

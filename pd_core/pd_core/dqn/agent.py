@@ -75,7 +75,12 @@ class DQNAgent:
         self.device = torch.device(device)
         self.capturable = capturable
         self.q = QNetwork(
-            n_inputs, n_actions, tuple(cfg.hidden), cfg.activation, near_pad=cfg.near_pad
+            n_inputs,
+            n_actions,
+            tuple(cfg.hidden),
+            cfg.activation,
+            near_pad=cfg.near_pad,
+            thrust_input=cfg.thrust_input,
         ).to(self.device)
         self.q_target = copy.deepcopy(self.q)
         for p in self.q_target.parameters():

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from pd_core.config import DQN_PAPER
+from pd_core.runtime.config import RuntimeConfig
 
 
 @dataclass
@@ -48,6 +49,11 @@ class TrainConfig:
     """ours: the first layer also sees tanh(position / 2, 2, 10 m; velocity / 0.5, 0.5, 2 m/s)
     (pd_core.state.near_pad_features), which resolve the last metres; a paper network given as
     init_policy is widened with zero weights on them"""
+    thrust_input: bool = False
+    """ours (issue 68): the first layer also sees the vertical thrust fraction the runtime layer
+    counts on (pd_core.state.thrust_input: 0 nominal, 1 at 80 %), recorded with every
+    demonstration and label; needs shield and dagger_rounds (no interaction: the env's
+    observations do not have it). An init_policy without it is widened with zero weights"""
     input_norm_init: bool = False
     """fold a standardisation of the scaled inputs (mean/std of visited states) into the first
     layer's initial weights; same architecture, better-conditioned start"""
@@ -128,6 +134,10 @@ class TrainConfig:
     demonstrations hold the actions flown), and the saved policies' metadata asks for it.
     Training episodes stay unshielded: shielding them left the overridden actions'
     Q-values untrained and the median fuel drifted from 338 to 450 kg in 13 min"""
+    layer_settings: str = ""
+    """with shield: runtime-layer settings changed from the code's default for the evaluations,
+    the demonstrations, the DAgger student and the saved files, as pd-eval's set:K=V,K=V (e.g.
+    brake_mass_loss=1,unmeasured_thrust=0.8; "": the default layer)"""
     init_policy: str = ""
     """policy file (.pt with its .json) whose weights start the Q and target networks: fine-tuning
     (its network must match hidden/activation; "": random initialisation)"""
@@ -300,6 +310,19 @@ PRESETS["ocp-dagger"] = {
     "eval_episodes": 2000,
 }
 
+# Ours for issue 68: `ocp-dagger` continued from its policy (--init-policy models/pd_dqn_ocp.pt),
+# a network that also sees the thrust fraction its layer counts on, behind the layer that counts
+# on the mass lost while braking and on 80 % thrust until the engine is measured; its teacher
+# mpc-fuel-reserve-state-ml quantises inside that limit at that fraction; under `adapt` (`broad`
+# with weak engines and navigation biases).
+PRESETS["ocp-adapt"] = {
+    **PRESETS["ocp-dagger"],
+    "dispersions": "adapt",
+    "controller": "mpc-fuel-reserve-state-ml",
+    "thrust_input": True,
+    "layer_settings": "brake_mass_loss=1,unmeasured_thrust=0.8",
+}
+
 SCENARIO_SAMPLING = ("uniform", "failures")
 DEVICES = ("auto", "cpu", "cuda")
 LOOPS = ("auto", "reference", "device")
@@ -363,6 +386,14 @@ def check_config(cfg: TrainConfig) -> None:
         raise ValueError(f"label_noise must be < 1, got {cfg.label_noise!r}")
     if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):
         raise ValueError("dagger_rounds needs label_episodes, batch_demo and pretrain_updates > 0")
+    if cfg.thrust_input and not (cfg.shield and cfg.dagger_rounds):
+        raise ValueError("thrust_input needs shield and dagger_rounds (it is the layer's figure)")
+    if cfg.thrust_input and (cfg.demos or cfg.recovery_demo_episodes):
+        raise ValueError("thrust_input takes no demos file or recovery demonstrations (7 columns)")
+    if cfg.layer_settings and not cfg.shield:
+        raise ValueError("layer_settings needs shield (they change the runtime layer)")
+    if cfg.layer_settings:
+        RuntimeConfig().with_settings(cfg.layer_settings)  # an unknown setting fails here
     if cfg.device not in DEVICES:
         raise ValueError(f"device must be one of {DEVICES}, got {cfg.device!r}")
     if cfg.loop not in LOOPS:

@@ -18,7 +18,7 @@ from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
 from pd_core.experiments.evaluate import rollout
 from pd_core.reward import reward as shaped_reward
 from pd_core.runtime.policy_file import load_policy
-from pd_core.state import scale_state
+from pd_core.state import scale_inputs
 
 CONTROLLER_SEED_OFFSET = 50_000_000
 """Controller demonstrations fly seeds disjoint from training (cfg.seed * 1000) and evaluation."""
@@ -35,7 +35,7 @@ FAILURE_SEARCH_CHUNK = 2000
 class DemoTransitions(NamedTuple):
     """Scaled n-step transitions ready for `DemoMemory.fill` (same fields as `ReplaySample`)."""
 
-    obs: np.ndarray  # (N, 7) scaled states (Eq. 20)
+    obs: np.ndarray  # (N, 7) scaled states (Eq. 20); (N, 8) with the thrust input
     actions: np.ndarray  # (N,) int64
     rewards: np.ndarray  # (N,) n-step discounted reward sums
     next_obs: np.ndarray  # (N, 7) scaled states after k <= n steps
@@ -43,9 +43,10 @@ class DemoTransitions(NamedTuple):
 
 
 class PhysicalSteps(NamedTuple):
-    """Consecutive 1-step transitions in SI units, grouped by `episode` (contiguous, in order)."""
+    """Consecutive 1-step transitions in SI units, grouped by `episode` (contiguous, in order);
+    with the thrust input the states carry the fraction the layer counted on as an 8th column."""
 
-    states: np.ndarray  # (N, 7)
+    states: np.ndarray  # (N, 7) or (N, 8)
     actions: np.ndarray  # (N,)
     next_states: np.ndarray  # (N, 7)
     dones: np.ndarray  # (N,) bool: the episode terminated at this step
@@ -63,10 +64,10 @@ def demo_transitions(
     )
     return DemoTransitions(
         *nstep_from_episodes(
-            scale_state(steps.states),
+            scale_inputs(steps.states),
             np.asarray(steps.actions, dtype=np.int64),
             rewards,
-            scale_state(steps.next_states),
+            scale_inputs(steps.next_states),
             np.asarray(steps.dones, dtype=bool),
             np.asarray(steps.episode),
             cfg.gamma,
@@ -85,12 +86,16 @@ def controller_steps(
     episode_seeds: np.ndarray | None = None,
     behind_layer: bool = False,
     address: str = "",
+    layer_settings: str = "",
+    thrust_input: bool = False,
 ) -> tuple[PhysicalSteps, float]:
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
     env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
     those that landed; its success rate. The MPC teacher flies on every core. `behind_layer`:
     the controller flies behind the runtime layer (a student trained with `shield` flies so).
-    `address`: the episodes fly as Ray tasks there instead (any controller)."""
+    `address`: the episodes fly as Ray tasks there instead (any controller). `layer_settings`
+    change that layer; `thrust_input`: the states carry the thrust fraction it counted on (the
+    next state the next step's, or the same at an episode's end)."""
     workers = None if name.startswith("mpc") else 1
     d = controller_demonstrations(
         name,
@@ -102,7 +107,16 @@ def controller_steps(
         episode_seeds=episode_seeds,
         behind_layer=behind_layer,
         address=address,
+        layer_settings=layer_settings,
     )
+    if thrust_input:
+        f = d.get("fraction", np.ones(len(d["episode"])))
+        ep = d["episode"]
+        nxt = np.append(f[1:], f[-1:])
+        last = np.append(ep[1:] != ep[:-1], True)
+        nxt[last] = f[last]
+        d["states"] = np.hstack([d["states"], f[:, None]])
+        d["next_states"] = np.hstack([d["next_states"], nxt[:, None]])
     keep = d["landed"][d["episode"]] if landed_only else np.ones(len(d["episode"]), dtype=bool)
     steps = PhysicalSteps(
         *(d[k][keep] for k in ("states", "actions", "next_states", "dones", "episode"))
@@ -207,8 +221,10 @@ def label_part(
         cfg.dispersions,
         address=cfg.address,
         noise=cfg.label_noise,
+        layer_settings=cfg.layer_settings,
     )
-    steps = PhysicalSteps(**label_transitions(d["states"], d["labels"]))
+    fraction = d["fraction"] if cfg.thrust_input else None
+    steps = PhysicalSteps(**label_transitions(d["states"], d["labels"], fraction))
     return demo_transitions(steps, cfg, reward_cfg), {
         "round": round_index,
         "teacher": teacher,
@@ -248,6 +264,8 @@ def build_demo_memory(
                 cfg.demo_landed_only,
                 behind_layer=cfg.shield,
                 address=cfg.address,
+                layer_settings=cfg.layer_settings,
+                thrust_input=cfg.thrust_input,
             )
             parts.append(demo_transitions(steps, cfg, reward_cfg))
             info["controller"].append(

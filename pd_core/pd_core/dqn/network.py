@@ -17,7 +17,9 @@ class QNetwork(nn.Module):
 
     With `near_pad` (ours, off by default) the first layer also sees
     `pd_core.state.near_pad_features` of its input: a fixed, parameter-free transform, so the
-    observation (Eq. 21) and the replay memories stay 7-wide."""
+    observation (Eq. 21) and the replay memories stay 7-wide. With `thrust_input` (ours, issue
+    68) the observation has an 8th column, `pd_core.state.thrust_input` of the vertical thrust
+    fraction the runtime layer counts on; the first layer sees [state, thrust, near-pad]."""
 
     def __init__(
         self,
@@ -26,6 +28,7 @@ class QNetwork(nn.Module):
         hidden: tuple[int, ...] = (300, 200, 300),
         activation: str = "tanh",
         near_pad: bool = False,
+        thrust_input: bool = False,
     ) -> None:
         super().__init__()
         if activation not in ACTIVATIONS:
@@ -33,7 +36,7 @@ class QNetwork(nn.Module):
         if near_pad and n_inputs < N_NEAR_PAD:
             raise ValueError(f"near_pad inputs need the 7 state inputs, got n_inputs={n_inputs}")
         layers: list[nn.Module] = []
-        width = n_inputs + (N_NEAR_PAD if near_pad else 0)
+        width = n_inputs + int(thrust_input) + (N_NEAR_PAD if near_pad else 0)
         for h in hidden:
             layers += [nn.Linear(width, h), ACTIVATIONS[activation]()]
             width = h
@@ -46,6 +49,9 @@ class QNetwork(nn.Module):
         self.hidden = tuple(hidden)
         self.activation = activation
         self.near_pad = near_pad
+        self.thrust_input = thrust_input
+        self.obs_width = n_inputs + int(thrust_input)
+        """columns of an observation: the scaled state, then the thrust input if on"""
         self.register_buffer(
             "_near_pad_gain", torch.as_tensor(NEAR_PAD_GAIN, dtype=torch.float32), persistent=False
         )
@@ -78,18 +84,29 @@ class QNetwork(nn.Module):
         }
         if self.near_pad:  # absent in files without them: their metadata is unchanged
             out["near_pad"] = True
+        if self.thrust_input:
+            out["thrust_input"] = True
         return out
 
     def widened_from(self, other: QNetwork) -> None:
-        """Copy `other`'s weights; near-pad inputs it lacks start with zero weight, so the
-        values are `other`'s exactly until training moves them (fine-tuning a paper network)."""
-        same = {k: v for k, v in other.shape_metadata().items() if k != "near_pad"}
-        mine = {k: v for k, v in self.shape_metadata().items() if k != "near_pad"}
-        if same != mine or (other.near_pad and not self.near_pad):
+        """Copy `other`'s weights; near-pad or thrust inputs it lacks start with zero weight, so
+        the values are `other`'s exactly until training moves them (fine-tuning a paper network,
+        or a 7-input network given the thrust input)."""
+        extras = ("near_pad", "thrust_input")
+        same = {k: v for k, v in other.shape_metadata().items() if k not in extras}
+        mine = {k: v for k, v in self.shape_metadata().items() if k not in extras}
+        lost = [k for k in extras if getattr(other, k) and not getattr(self, k)]
+        if same != mine or lost:
             raise ValueError(f"cannot widen {other.shape_metadata()} to {self.shape_metadata()}")
         state = other.state_dict()
         w = state["net.0.weight"]
-        if w.shape[1] < self.net[0].weight.shape[1]:
-            pad = torch.zeros(w.shape[0], self.net[0].weight.shape[1] - w.shape[1])
-            state["net.0.weight"] = torch.cat([w, pad], dim=1)
+        zero = torch.zeros(w.shape[0], 1, dtype=w.dtype)
+        n = other.n_inputs
+        cols = [w[:, :n]]
+        if self.thrust_input:
+            cols.append(w[:, n : n + 1] if other.thrust_input else zero)
+        if self.near_pad:
+            near = w[:, other.obs_width :] if other.near_pad else zero.repeat(1, N_NEAR_PAD)
+            cols.append(near)
+        state["net.0.weight"] = torch.cat(cols, dim=1)
         self.load_state_dict(state)

@@ -69,8 +69,12 @@ def policy_metadata(cfg: TrainConfig, extra: dict[str, Any] | None = None) -> di
 
 
 def runtime_config_for(cfg: TrainConfig) -> RuntimeConfig:
-    """What a network trained with `cfg` flies behind: the default runtime layer, or none."""
-    return RuntimeConfig() if cfg.shield else RuntimeConfig.off()
+    """What a network trained with `cfg` flies behind: the default runtime layer with
+    `cfg.layer_settings` changed (`RuntimeConfig.with_settings`), or none."""
+    if not cfg.shield:
+        return RuntimeConfig.off()
+    layer = RuntimeConfig()
+    return layer.with_settings(cfg.layer_settings) if cfg.layer_settings else layer
 
 
 def greedy_evaluation(
@@ -386,7 +390,7 @@ class Trainer(TrainingLoop):
         return save_policy(self.run_dir / name, self.cpu_network(), self.runtime_config(), meta)
 
     def runtime_config(self) -> RuntimeConfig:
-        """What the trained network flies behind: the default runtime layer, or none."""
+        """What the trained network flies behind (`runtime_config_for`)."""
         return runtime_config_for(self.cfg)
 
 

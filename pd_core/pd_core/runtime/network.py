@@ -9,7 +9,7 @@ import numpy as np
 
 from pd_core.runtime.kernels import states_valid
 from pd_core.runtime.kernels_step import network_inputs
-from pd_core.state import NEAR_PAD_GAIN, STATE_LIMITS, as_state_rows, check_state
+from pd_core.state import NEAR_PAD_GAIN, STATE_LIMITS, as_state_rows, check_state, thrust_input
 
 _LAYER = re.compile(r"^net\.(\d+)\.(weight|bias)$")
 _NO_GAIN = np.zeros(0)
@@ -29,7 +29,12 @@ class NumpyQNetwork:
     """Greedy actions of a fully connected Q-network (`pd_core.dqn.network.QNetwork`'s layout:
     `net.<i>.weight` (out, in) and `net.<i>.bias`) on physical states (B, 7), SI: the inputs are
     scaled by `state_scale` (Eqs. 20-21), with the near-pad features where the network has them,
-    and the layers run in `dtype`."""
+    and the layers run in `dtype`.
+
+    A network with the thrust input (`thrust_input`, issue 68) also sees
+    `pd_core.state.thrust_input` of the vertical thrust fraction the runtime layer counts on:
+    `Runtime.step_rows` hands it over (`take_thrust_fraction`) before each `act_batch`, which
+    uses it once; an `act_batch` without it (`Runtime.bare_action`) sees a nominal engine."""
 
     def __init__(
         self,
@@ -38,6 +43,7 @@ class NumpyQNetwork:
         activation: str = "tanh",
         near_pad: bool = False,
         dtype: str = "float32",
+        thrust_input: bool = False,
     ) -> None:
         found = sorted(
             {int(m.group(1)) for k in tensors if (m := _LAYER.match(k))},
@@ -57,6 +63,12 @@ class NumpyQNetwork:
         self._near_gain = NEAR_PAD_GAIN if near_pad else _NO_GAIN
         self.activation = activation
         self.n_actions = self.layers[-1][1].shape[0]
+        self.takes_thrust_fraction = thrust_input
+        self._fraction: np.ndarray | None = None
+
+    def take_thrust_fraction(self, fraction: np.ndarray) -> None:
+        """The fraction (B,) the layer counts on for the rows of the next `act_batch`."""
+        self._fraction = np.asarray(fraction, dtype=float).reshape(-1)
 
     def q_values(self, states: np.ndarray) -> np.ndarray:
         """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid. The
@@ -67,10 +79,14 @@ class NumpyQNetwork:
         scaled, near = np.empty((b, 7)), np.empty((b, k))
         if not network_inputs(s, STATE_LIMITS, self.scale, self._near_gain, scaled, near):
             check_state(states)
-        h = np.empty((b, 7 + k), dtype=self.dtype)
+        t = int(self.takes_thrust_fraction)
+        h = np.empty((b, 7 + t + k), dtype=self.dtype)
         h[:, :7] = scaled
+        if t:
+            f, self._fraction = self._fraction, None
+            h[:, 7] = thrust_input(f) if f is not None and len(f) == b else 0.0
         if k:
-            h[:, 7:] = np.tanh(near)
+            h[:, 7 + t :] = np.tanh(near)
         last = len(self.layers) - 1
         for i, (w, b) in enumerate(self.layers):
             h = h @ w

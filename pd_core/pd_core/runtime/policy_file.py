@@ -164,6 +164,7 @@ def _weights_mismatch(state: dict[str, Any], want: dict[str, tuple[int, ...]]) -
 def _network_shapes(shape: dict[str, Any]) -> dict[str, tuple[int, ...]]:
     """The tensor shapes of `pd_core.dqn.network.QNetwork` with this shape metadata."""
     width = int(shape["n_inputs"]) + (6 if shape.get("near_pad") else 0)
+    width += 1 if shape.get("thrust_input") else 0
     out: dict[str, tuple[int, ...]] = {}
     sizes = [*(int(h) for h in shape["hidden"]), int(shape["n_actions"])]
     for i, h in enumerate(sizes):
@@ -246,6 +247,7 @@ def load_policy(path: str | Path, shield: str = "file") -> Runtime:
         shape["activation"],
         near_pad=bool(shape.get("near_pad", False)),
         dtype=config.network_dtype,
+        thrust_input=bool(shape.get("thrust_input", False)),
     )
     space = ActionSpace(
         tuple(meta["n_per_axis"]),
