@@ -327,7 +327,15 @@ def test_config_flags_and_presets():
         65,
     )
     assert a1.hidden == (300, 200, 300) and a1.optimizer == "rmsprop" and a1.epsilon0 == 0.6
-    assert set(PRESETS) == {"paper-agent1", "paper-agent2", "best", "robust", "ocp", "ocp-dagger"}
+    assert set(PRESETS) == {
+        "paper-agent1",
+        "paper-agent2",
+        "best",
+        "robust",
+        "ocp",
+        "ocp-dagger",
+        "ocp-adapt",
+    }
     # issue 32: from scratch, and every demonstration from the optimal-control teacher
     ocp = preset("ocp")
     assert ocp.init_policy == "" and ocp.demos == "" and ocp.controller == "mpc-fuel-reserve-state"

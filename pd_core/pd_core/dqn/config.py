@@ -451,7 +451,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for f in fields(TrainConfig):
         flag = "--" + f.name.replace("_", "-")
         default = f.default if f.default is not dataclasses.MISSING else None
-        help_ = f"{docs.get(f.name, '')} (preset default; base {default!r})"
+        text = docs.get(f.name, "").replace("%", "%%")  # argparse formats help with %
+        help_ = f"{text} (preset default; base {default!r})"
         if f.name == "preset":
             parser.add_argument(flag, default="paper-agent1", choices=sorted(PRESETS), help=help_)
         elif f.type in ("bool", bool):
