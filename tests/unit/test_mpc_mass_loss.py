@@ -19,6 +19,7 @@ from pd_core.teachers.registry import CONTROLLERS, RESERVE_STATE_PARAMS, make_co
 T_MAX_N = float(RL_THRUST.max_n[2])
 ML_NAME = "mpc-fuel-reserve-state-ml"
 PLAN_NAME = "mpc-fuel-reserve-state-ml-plan"
+LF_NAME = "mpc-fuel-reserve-state-lf"
 # 2500 m, 2000 kg: the limit at the mass now is 103.2 m/s, counting on the mass lost while
 # braking 109.4 m/s (docs/experiments/2026-12-04-braking-law-and-beyond.md)
 BETWEEN = np.array([0.0, 0.0, 2500.0, 0.0, 0.0, -106.0, 2000.0])
@@ -34,17 +35,18 @@ def _coast(ctl: MPCController) -> int:
     return int(ctl.actions.levels_to_action(np.array([[mid[0], mid[1], 0]]))[0])
 
 
-def test_new_fields_are_off_in_every_teacher_but_the_ml_ones() -> None:
+def test_new_fields_are_off_in_every_teacher_but_the_ml_and_lf_ones() -> None:
     assert MPCParams().brake_mass_loss is False and MPCParams().layer_thrust_fraction is False
     assert MPCParams().plan_brake_margin_mps is None
-    assert {ML_NAME, PLAN_NAME} <= set(CONTROLLERS)
+    assert {ML_NAME, PLAN_NAME, LF_NAME} <= set(CONTROLLERS)
     for name in CONTROLLERS:
         ctl = make_controller(name)
         if not isinstance(ctl, MPCController):
             continue
         ml = name in (ML_NAME, PLAN_NAME)
-        assert ctl.params.brake_mass_loss is ml and ctl.params.layer_thrust_fraction is ml, name
-        assert ctl.takes_thrust_fraction is ml
+        lf = ml or name == LF_NAME
+        assert ctl.params.brake_mass_loss is ml and ctl.params.layer_thrust_fraction is lf, name
+        assert ctl.takes_thrust_fraction is lf
         assert (ctl._envelope() is not None) is (name == PLAN_NAME), name
     ml = make_controller(ML_NAME)
     assert ml.name == ML_NAME
@@ -52,6 +54,8 @@ def test_new_fields_are_off_in_every_teacher_but_the_ml_ones() -> None:
     assert replace(ml.params, brake_mass_loss=False, layer_thrust_fraction=False) == (
         RESERVE_STATE_PARAMS
     )
+    lf = make_controller(LF_NAME)
+    assert replace(lf.params, layer_thrust_fraction=False) == RESERVE_STATE_PARAMS
 
 
 def test_plan_envelope_is_the_layers_limit_on_the_counted_fraction() -> None:

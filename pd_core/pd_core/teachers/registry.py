@@ -8,7 +8,8 @@ recipe's teacher, is the same teacher handing over to its fallback on the state'
 `mpc-fuel-reserve-state-ml` (issue 68) is that teacher quantising within the braking limit that
 counts on the mass lost while braking, on the vertical thrust fraction its runtime layer counts
 on (`RESERVE_STATE_ML_PARAMS`); without a layer it counts on full thrust.
-`mpc-fuel-reserve-state-ml-plan` also plans inside that limit (`RESERVE_STATE_ML_PLAN_PARAMS`).
+`mpc-fuel-reserve-state-ml-plan` also plans inside that limit (`RESERVE_STATE_ML_PLAN_PARAMS`);
+`mpc-fuel-reserve-state-lf` keeps the limit at the mass now on that fraction.
 """
 
 from __future__ import annotations
@@ -56,6 +57,10 @@ RESERVE_STATE_PARAMS = replace(RESERVE_PARAMS, handover_from_state=True)
 RESERVE_STATE_ML_PARAMS = replace(
     RESERVE_STATE_PARAMS, brake_mass_loss=True, layer_thrust_fraction=True
 )
+# `mpc-fuel-reserve-state-lf`: the braking limit at the mass now (as every file before issue 68)
+# on the fraction the layer counts on; fly it behind e.g. `set:unmeasured_thrust=0.8:` (the
+# ablation of the mass-loss limit, docs/experiments/2026-12-05-adapt-student.md)
+RESERVE_STATE_LF_PARAMS = replace(RESERVE_STATE_PARAMS, layer_thrust_fraction=True)
 # `mpc-fuel-reserve-state-ml-plan`: the same whose fuel plans also keep 0.35 m/s inside that
 # limit (`MPCParams.plan_brake_margin_mps`; the floor's middle margin, chosen before flying it),
 # with 3 LP passes per warm re-plan (the envelope's rows are linearised at the shifted plan: with
@@ -107,6 +112,9 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     ),
     "mpc-fuel-reserve-state-ml": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS), RESERVE_STATE_ML_PARAMS, "mpc-fuel-reserve-state-ml"
+    ),
+    "mpc-fuel-reserve-state-lf": lambda: reserve_controller(
+        ZemZevController(VERNIER_PARAMS), RESERVE_STATE_LF_PARAMS, "mpc-fuel-reserve-state-lf"
     ),
     "mpc-fuel-reserve-state-ml-plan": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS),
