@@ -37,6 +37,7 @@ def test_failed_episodes_are_listed_and_fly_again_from_their_seed(tmp_path, caps
     failed = cell["failed_episodes"]
     assert failed["count"] == round(40 * (1 - cell["success_rate"])) > 0
     assert len(failed["listed"]) == failed["count"]  # under the listing limit
+    assert failed["episodes"] == [e["episode"] for e in failed["listed"]]  # every index
     assert f"all / zz: {failed['count']} failed: seed {failed['listed'][0]['seed']}" in text
     for e in failed["listed"]:
         assert e["seed"] == 3 + e["episode"]

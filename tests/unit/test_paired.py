@@ -39,3 +39,13 @@ def test_paired_curves_compare_networks_at_common_update_counts_only():
     assert got.mean_b == pytest.approx((0.90 + 0.99 + 0.98) / 3)
     with pytest.raises(ValueError, match="no update count"):
         paired_curves({2000: 1.0}, {4000: 1.0})
+
+
+def test_cells_with_every_failed_index_pair_completely_past_the_listed_ones():
+    """A cell lists 2 failures in detail but holds all 250 by index: the pairs are complete and
+    count the unlisted ones too."""
+    a = cell([0, 1], count=250)
+    a["failed_episodes"]["episodes"] = list(range(250))
+    b = cell([0, 1, 300])
+    assert pairs(a, b) == (1, 248, True)  # A lands 300 only; B lands 2..249
+    assert pairs(b, a) == (248, 1, True)

@@ -172,7 +172,8 @@ def metrics(ro: Rollouts) -> dict[str, float]:
 def failures(ro: Rollouts, seed: int, limit: int = LISTED_FAILURES_JSON) -> dict[str, Any]:
     """The cell's failed episodes, enough to replay each (episode i flies on env seed seed + i,
     so `--episodes 1 --seed <its seed>` flies it again) and to see how it failed: off the pad
-    (Eq. 12's 5 m), too fast (2 m/s) or out of time."""
+    (Eq. 12's 5 m), too fast (2 m/s) or out of time; the first `limit` in detail (`listed`),
+    every one by index (`episodes`), so two cells pair completely."""
     f = ro.final_states
     miss = np.linalg.norm(f[:, 0:2], axis=1)
     speed = np.linalg.norm(f[:, 3:6], axis=1)
@@ -195,7 +196,7 @@ def failures(ro: Rollouts, seed: int, limit: int = LISTED_FAILURES_JSON) -> dict
                 "k_velocity_mps": round(float(f[i, 5]), 3),
             }
         )
-    return {"count": int(idx.size), "listed": listed}
+    return {"count": int(idx.size), "episodes": idx.tolist(), "listed": listed}
 
 
 def merge(

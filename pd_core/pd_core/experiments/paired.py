@@ -1,8 +1,9 @@
 """Paired comparison of two agents flown on the same episodes (episode i on seed s + i): the
 episodes only one of them lands, and the two-sided exact sign test on those pairs.
 
-A campaign cell (`campaign.json`'s results[scenario][agent]) lists its failed episodes by
-episode index (`failed_episodes.listed`, at most `campaign.LISTED_FAILURES_JSON`); the pairs are
+A campaign cell (`campaign.json`'s results[scenario][agent]) holds every failed episode's index
+(`failed_episodes.episodes`) and details the first `campaign.LISTED_FAILURES_JSON`
+(`failed_episodes.listed`); a file written before the full index pairs from the listed ones,
 complete only where every failure is listed.
 
 Two training runs' selection curves (`evals.csv`: success rate against gradient updates, each
@@ -36,10 +37,16 @@ def pairs(cell_a: Mapping[str, Any], cell_b: Mapping[str, Any]) -> Pairs:
     """The discordant pairs of two campaign cells of the same scenario and episodes."""
     none = {"count": 0, "listed": []}
     fa, fb = cell_a.get("failed_episodes", none), cell_b.get("failed_episodes", none)
-    ea = {e["episode"] for e in fa["listed"]}
-    eb = {e["episode"] for e in fb["listed"]}
+    ea, eb = _failed(fa), _failed(fb)
     complete = fa["count"] == len(ea) and fb["count"] == len(eb)
     return Pairs(len(eb - ea), len(ea - eb), complete)
+
+
+def _failed(cell_failures: Mapping[str, Any]) -> set[int]:
+    """The failed episode indices a cell holds: all of them, or the listed ones (older files)."""
+    if "episodes" in cell_failures:
+        return {int(i) for i in cell_failures["episodes"]}
+    return {int(e["episode"]) for e in cell_failures["listed"]}
 
 
 class CurvePairs(NamedTuple):
