@@ -16,12 +16,14 @@
 #
 # --adapt (issue 68) adds a third stage to the ocp recipe:
 #   3. `ocp-adapt` preset from stage 2's best.pt: the network also sees the thrust fraction its
-#      layer counts on (widened with zero weights), behind the layer that counts on the mass lost
-#      while braking and on 80 % thrust until the engine is measured, and the teacher
-#      mpc-fuel-reserve-state-ml; under `adapt` (`broad` with weak engines and navigation
-#      biases): 500 teacher episodes and seven DAgger rounds as stage 2. Its policy is
-#      DIR/stage3/best.pt. --stage2 FILE starts it from FILE (e.g. models/pd_dqn_ocp.pt, stage 2
-#      of seed 1) and skips stages 1 and 2.
+#      layer counts on (widened with zero weights), behind the layer that counts on 80 % thrust
+#      until the engine is measured, and the teacher mpc-fuel-reserve-state-lf; under `adapt`
+#      (`broad` with weak engines and navigation biases): 500 teacher episodes and seven DAgger
+#      rounds as stage 2, 140k updates (25 min). Its policy is DIR/stage3/final.pt (the
+#      selection curve on `adapt` is flat within its noise; docs/experiments/
+#      2026-12-05-adapt-student.md). --stage2 FILE starts it from FILE (models/pd_dqn_ocp.pt is
+#      stage 2 of seed 1) and skips stages 1 and 2: `--adapt --stage2 models/pd_dqn_ocp.pt`
+#      gives models/pd_dqn_adapt.pt.
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
@@ -59,8 +61,8 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    --teacher zemzev-vernier: DIR/stage1..3, default runs/recipe__S)
   --stage1 FILE    skip stage 1 and start stage 2 from this policy
   --adapt          with --teacher ocp: a third stage, `ocp-adapt` (issue 68: the thrust input,
-                   the mass-loss limit, 80 % until measured, weak engines and navigation
-                   biases); the policy is DIR/stage3/best.pt
+                   80 % until measured, weak engines and navigation biases); the policy is
+                   DIR/stage3/final.pt
   --stage2 FILE    with --adapt: skip stages 1 and 2 and start stage 3 from this policy
   --teacher T      ocp (default: the optimal-control teacher's recipe above, demonstrations
                    then aggregated DAgger rounds; the policy is DIR/stage2/best.pt) or
@@ -186,7 +188,7 @@ if [[ "$teacher" == ocp ]]; then
     fi
     if ((adapt)); then
         stage stage3 --preset ocp-adapt --init-policy "$stage2"
-        ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/best.pt"
+        ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/final.pt"
         exit 0
     fi
     ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage2/best.pt"

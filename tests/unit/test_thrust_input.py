@@ -116,7 +116,8 @@ def test_shadow_teacher_records_the_fraction_with_each_state_and_labels_carry_it
 def test_the_thrust_input_needs_the_layer_and_dagger_rounds() -> None:
     cfg = preset("ocp-adapt", init_policy="models/pd_dqn_ocp.pt")
     check_config(cfg)
-    assert cfg.thrust_input and cfg.layer_settings == CANDIDATE
+    assert cfg.thrust_input and cfg.layer_settings == "unmeasured_thrust=0.8"
+    assert cfg.controller == "mpc-fuel-reserve-state-lf"
     for bad in (
         preset("ocp", thrust_input=True),
         preset("ocp-adapt", shield=False),

@@ -312,15 +312,18 @@ PRESETS["ocp-dagger"] = {
 
 # Ours for issue 68: `ocp-dagger` continued from its policy (--init-policy models/pd_dqn_ocp.pt),
 # a network that also sees the thrust fraction its layer counts on, behind the layer that counts
-# on the mass lost while braking and on 80 % thrust until the engine is measured; its teacher
-# mpc-fuel-reserve-state-ml quantises inside that limit at that fraction; under `adapt` (`broad`
-# with weak engines and navigation biases).
+# on 80 % thrust until the engine is measured; its teacher mpc-fuel-reserve-state-lf quantises
+# inside that limit at that fraction; under `adapt` (`broad` with weak engines and navigation
+# biases). The arm that also counts on the mass lost while braking (--controller
+# mpc-fuel-reserve-state-ml --layer-settings brake_mass_loss=1,unmeasured_thrust=0.8) lands
+# fewer late weak engines and combined dispersions, paired on 2000 `beyond` episodes each
+# (docs/experiments/2026-12-05-adapt-student.md).
 PRESETS["ocp-adapt"] = {
     **PRESETS["ocp-dagger"],
     "dispersions": "adapt",
-    "controller": "mpc-fuel-reserve-state-ml",
+    "controller": "mpc-fuel-reserve-state-lf",
     "thrust_input": True,
-    "layer_settings": "brake_mass_loss=1,unmeasured_thrust=0.8",
+    "layer_settings": "unmeasured_thrust=0.8",
 }
 
 SCENARIO_SAMPLING = ("uniform", "failures")
