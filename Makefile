@@ -43,10 +43,11 @@ demo: setup
 train: setup
 	$(IN_ENV) pd-train $(ARGS)
 
-# The shipped policy's recipe (models/pd_dqn_ocp.md): two pd-train stages from the optimal-control
-# teacher, runs under runs/ocp__$(SEED); the policy is runs/ocp__$(SEED)/stage2/best.pt
+# The shipped policy's recipe (models/pd_dqn_adapt.md): three pd-train stages from optimal-control
+# teachers, runs under runs/ocp__$(SEED); the policy is runs/ocp__$(SEED)/stage3/final.pt (stage 2,
+# runs/ocp__$(SEED)/stage2/best.pt, is models/pd_dqn_ocp.pt for seed 1)
 recipe: setup
-	$(IN_ENV) scripts/train_recipe.sh --seed $(or $(SEED),1) $(ARGS)
+	$(IN_ENV) scripts/train_recipe.sh --adapt --seed $(or $(SEED),1) $(ARGS)
 
 bench: setup
 	@shopt -s nullglob; files=(bench/*.py); \

@@ -28,10 +28,11 @@ from pd_core.runtime.layer import Runtime
 from pd_core.runtime.network import NumpyQNetwork
 
 FORMAT_VERSION = 2
-SHIPPED_POLICY = Path("models") / "pd_dqn_ocp.pt"
+SHIPPED_POLICY = Path("models") / "pd_dqn_adapt.pt"
 """The policy flown when none is named (pd_policy_node, pd_demo, benches), relative to the
-repository root: the optimal-control student, trained from `mpc-fuel-reserve` alone by
-`scripts/train_recipe.sh --seed 1` (models/pd_dqn_ocp.md)."""
+repository root: the optimal-control student that sees its layer's thrust fraction, trained
+from optimal-control teachers alone by `scripts/train_recipe.sh --adapt --seed 1`
+(models/pd_dqn_adapt.md; its stage 2 is models/pd_dqn_ocp.pt)."""
 SHIELD_MODES = ("file", "always", "never")
 """`load_policy(shield=...)`: the runtime config the file pins; the code's default runtime
 config (`RuntimeConfig()`); or none (`RuntimeConfig.off()`: the bare network)"""
