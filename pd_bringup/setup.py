@@ -8,7 +8,7 @@ package_name = "pd_bringup"
 
 setup(
     name=package_name,
-    version="0.1.0",
+    version="0.3.0",
     packages=find_packages(exclude=["test", "tests"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
