@@ -7,7 +7,7 @@ layer leave what shipped files fly unchanged, to the bit?
 Flies each agent (a `pd-eval` spec: a policy file, `shield:controller:NAME`, `set:K=V:SPEC`;
 default: every policy file in models/, each behind its own pinned runtime layer) on
 `--episodes` episodes of each scenario (episode i on env seed seed + i, `Runtime.step_rows` on
-all landers still flying, as `pd_core.experiments.evaluate.rollout` does) and prints the
+all landers still flying, as `pd_core.episodes.rollout` does) and prints the
 SHA-256 of every step's record: the action flown, the action proposed, the source, the
 identified delay, the thrust fraction counted on, whether the navigation filter was engaged, and
 the true states after the step. Run it before and after a change; equal digests mean equal
@@ -28,7 +28,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from pd_core.dispersions import load_scenarios  # noqa: E402
-from pd_core.experiments.campaign import load_actor  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.vector_env import make_vector_env  # noqa: E402
 
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     specs = a.specs or [str(p) for p in sorted((ROOT / "models").glob("*.pt"))]
     scenarios = load_scenarios(a.dispersions)
     for spec in specs:
-        rt, _ = load_actor(spec)
+        rt = build(spec).actor
         if not isinstance(rt, Runtime):
             raise SystemExit(f"{spec}: not behind a runtime layer (no decisions to digest)")
         hexd, steps = digest(rt, scenarios, a.episodes, a.seed)

@@ -41,7 +41,7 @@ from pd_core.config import (  # noqa: E402
     ThrustLimits,
 )
 from pd_core.envelope import descent_limits  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.ocp.fuel import BrakeEnvelope, envelope_fuel_plan  # noqa: E402
 from pd_core.ocp.lp import new_highs  # noqa: E402
 from pd_core.teachers.mpc import brake_limited  # noqa: E402

@@ -29,8 +29,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pd_core.dispersions import NOMINAL  # noqa: E402
-from pd_core.experiments.campaign import load_actor, metrics, run_campaign  # noqa: E402
-from pd_core.experiments.evaluate import CHUNK_EPISODES, fly_episodes  # noqa: E402
+from pd_core.episodes import CHUNK_EPISODES, fly_episodes  # noqa: E402
+from pd_core.experiments.campaign import metrics, run_campaign  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.vector_env import make_vector_env  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -96,7 +97,7 @@ def env_step_floor_us() -> float:
 
 
 def profile(spec: str) -> dict:
-    actor, _ = load_actor(spec)
+    actor = build(spec).actor
     env = make_vector_env(CHUNK_EPISODES, autoreset=False)
     timed = Timed(actor, env)
     t0 = time.perf_counter()
@@ -128,7 +129,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--ray-cpus", type=int, default=2)
     p.add_argument("--json", help="also write the figures to this file")
     args = p.parse_args(argv)
-    from pd_core.experiments.ray_session import connect  # Ray only for the Ray half
+    from pd_core.ray_session import connect  # Ray only for the Ray half
 
     agents = {"DQN (shipped)": args.model, "ZEM/ZEV": "controller:zemzev"}
     rows, profiles = {}, {}

@@ -29,8 +29,8 @@ from pd_core import ocp  # noqa: E402
 from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
 from pd_core.config import DT_S, RL_THRUST, ThrustLimits  # noqa: E402
 from pd_core.dynamics import mass_flow_kgps  # noqa: E402
-from pd_core.experiments.campaign import load_actor  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.runtime.policy_file import SHIPPED_POLICY  # noqa: E402
 from pd_core.teachers.registry import make_controller  # noqa: E402
 
@@ -113,7 +113,8 @@ def main() -> None:
         for f, sols in solved.items()
     ]
     for spec in a.agents:
-        actor, label = load_actor(spec)
+        built = build(spec)
+        actor, label = built.actor, built.label
         ro = rollout(actor, a.episodes, a.seed, keep_trajectories=a.episodes)
         if not ro.landed.all():
             label += f" ({ro.landed.mean() * 100:.0f} % landed)"

@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.dispersions import load_scenarios  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.runtime.config import RulesConfig, RuntimeConfig  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController  # noqa: E402

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST  # noqa: E402
 from pd_core.dispersions import load_scenarios  # noqa: E402
 from pd_core.envelope import max_descent_speed_mass_loss_mps  # noqa: E402
-from pd_core.experiments.campaign import load_actor  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.runtime.policy_file import SHIPPED_POLICY  # noqa: E402
 from pd_core.vector_env import make_vector_env  # noqa: E402
@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     (d,) = [s for s in load_scenarios(a.dispersions) if s.name == a.scenario]
     if d.thrust_factor is None:
         raise SystemExit(f"{a.scenario}: no thrust factor")
-    rt, label = load_actor(a.spec)
+    built = build(a.spec)
+    rt, label = built.actor, built.label
     if not isinstance(rt, Runtime):
         raise SystemExit(f"{a.spec}: not behind a runtime layer")
     n = a.episodes

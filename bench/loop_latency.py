@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from pd_core.runtime.build import shipped_policy
 from pd_core.sim import Command, Simulator
 from pd_core.ticker import percentiles_ms
 from pd_interfaces.msg import LanderState, ThrustCommand
-from pd_policy_node.node import default_model_path
 from pd_ros_common import names
 from pd_ros_common.convert import state_msg
 from pd_ros_common.domain import claim_domain_id
@@ -52,7 +52,7 @@ def parse_args() -> argparse.Namespace:
 def model_path(arg: str, tmp: Path) -> tuple[str, str]:
     if arg:
         return arg, "given"
-    shipped = default_model_path()
+    shipped = shipped_policy()
     if shipped.is_file():
         return str(shipped), "shipped"
     import torch  # optional heavy dependency: only without a shipped model

@@ -20,8 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from pd_core.actions import DEFAULT_ACTIONS  # noqa: E402
-from pd_core.experiments.campaign import load_actor  # noqa: E402
-from pd_core.experiments.evaluate import Rollouts, rollout  # noqa: E402
+from pd_core.episodes import Rollouts, rollout  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 
 GATES_M = (100.0, 20.0, 10.0, 5.0, 2.0, 1.0)
 BANDS_M = ((0.0, 2.0), (2.0, 5.0), (5.0, 20.0), (20.0, 100.0), (100.0, 1e4))
@@ -61,14 +61,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.episodes < 1:
         ap.error("--episodes must be >= 1")
-    teacher, _ = load_actor(TEACHER)
+    teacher = build(TEACHER).actor
     head = " ".join(f"{f'<{h:g} m':>12}" for h in GATES_M)
     print(f"median lateral distance (m) / speed (m/s) on first passing below, {args.episodes} "
           f"nominal episodes, seed {args.seed}")  # fmt: skip
     print(f"{'agent':<36}{head}{'touchdown':>12}")
     agree = {}
     for spec in args.agents:
-        actor, _ = load_actor(spec)
+        actor = build(spec).actor
         ro = rollout(actor, args.episodes, args.seed, keep_trajectories=args.episodes)
         g = at_gates(ro)
         miss = float(np.median(np.hypot(ro.final_states[:, 0], ro.final_states[:, 1])))

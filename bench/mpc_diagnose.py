@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.runtime.config import RuntimeConfig  # noqa: E402
 from pd_core.runtime.decision import SOURCES  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402

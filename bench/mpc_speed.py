@@ -46,7 +46,7 @@ from scipy.optimize import linprog  # noqa: E402
 from pd_core import ocp  # noqa: E402
 from pd_core.config import RL_THRUST  # noqa: E402
 from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.ocp.fuel import fuel_weights  # noqa: E402
 from pd_core.ocp.lp import LPSolver, new_highs  # noqa: E402
 from pd_core.ocp.model import KN  # noqa: E402

@@ -23,7 +23,7 @@ import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DQN_PAPER, REWARD
-from pd_core.env import transition
+from pd_core.lander import transition
 from pd_core.reward import target_velocity
 
 MAX_STEPS = 750  # 150 s

@@ -32,12 +32,11 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pd_core.dispersions import NOMINAL  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.experiments.campaign import metrics, run_campaign  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
-from pd_core.runtime import RuntimeConfig, load_policy  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.runtime.policy_file import SHIPPED_POLICY  # noqa: E402
-from pd_core.teachers.registry import make_controller  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / SHIPPED_POLICY
@@ -93,13 +92,13 @@ def main() -> None:
     policy = Path(args.policy)
 
     t0 = time.perf_counter()
-    rt = load_policy(policy)
+    rt = build(policy).runtime
     load_s = time.perf_counter() - t0
     print(implementation(rt, load_s) + "\n")
     path = rollout(rt, 1, 0, keep_trajectories=1).trajectories[0][:-1]  # one nominal flight
     repeats = max(1, args.decisions // (len(path) * args.rounds))
-    zz = Runtime(make_controller("zemzev-vernier"), RuntimeConfig.off())
-    teacher = Runtime(make_controller("mpc-fuel-reserve"), RuntimeConfig())
+    zz = build("controller:zemzev-vernier", layer=True).runtime
+    teacher = build("shield:controller:mpc-fuel-reserve").runtime
 
     def layer_step(s: np.ndarray) -> None:
         rt.step(s)

@@ -13,9 +13,9 @@ horizontal level per state.
 
 An AGENT is a policy file (its network alone: below 5 m no rule of the runtime layer acts on
 the horizontal axes), or `controller:NAME` (`zemzev-vernier`, `mpc-fuel-reserve`, ...): a
-controller that plans answers from each state alone, with a cold solve
-(`MPCController.first_action`). Default: the shipped policy, its teacher and ZEM/ZEV-vernier.
-A few seconds; no campaign is flown.
+controller that plans answers from each state alone, with a cold solve (`propose` of a fresh
+`MPCController`: no plan held). Default: the shipped policy, its teacher and ZEM/ZEV-vernier. A
+few seconds; no campaign is flown.
 """
 
 from __future__ import annotations
@@ -25,9 +25,8 @@ import argparse
 import numpy as np
 
 from pd_core.actions import DEFAULT_ACTIONS
-from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
-from pd_core.teachers.mpc import MPCController
-from pd_core.teachers.registry import make_controller
+from pd_core.runtime.build import build
+from pd_core.runtime.policy_file import SHIPPED_POLICY
 
 ALTITUDES_M = ((1.5, -1.5), (2.8, -2.8), (4.0, -3.0), (8.0, -4.0))  # (z, vz) pairs
 SHORT_M = (-4.0, -3.0, -2.0, -1.0, 0.0)  # x: the pad lies ahead of a lander sliding at +vx
@@ -48,14 +47,9 @@ def probe_states() -> np.ndarray:
 
 def x_levels(spec: str, states: np.ndarray) -> np.ndarray:
     """The agent's horizontal (x) thrust level on each state."""
-    if spec.startswith("controller:"):
-        ctl = make_controller(spec.split(":", 1)[1])
-        if isinstance(ctl, MPCController):
-            actions = np.array([ctl.first_action(s) for s in states])
-        else:
-            actions = ctl.act_batch(states)
-    else:
-        actions = load_policy(spec).actor.act_batch(states)
+    # the network or controller alone, each state on its own (a fresh MPC teacher plans each
+    # from scratch: `propose` on no plans)
+    actions = build(spec, layer=True).runtime.actor.propose(states)
     return DEFAULT_ACTIONS.level_table[np.asarray(actions, dtype=np.int64)][:, 0]
 
 

@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 
 from pd_core.dispersions import load_scenarios
-from pd_core.experiments.campaign import load_actor, run_campaign
-from pd_core.experiments.evaluate import fuel_optimal_ratios, layer_changed_rate, rollout
+from pd_core.episodes import layer_changed_rate, rollout
+from pd_core.experiments.campaign import run_campaign
+from pd_core.experiments.evaluate import fuel_optimal_ratios
+from pd_core.runtime.build import build
 
 COLUMNS = (
     ("nominal_success_pct", "nominal %", "{:.2f}"),
@@ -41,10 +43,10 @@ COLUMNS = (
 
 def measure(path: str, a: argparse.Namespace) -> dict[str, Any]:
     """The figures of one policy file."""
-    actor, _name = load_actor(path)
+    actor = build(path).actor
     ro = rollout(actor, a.episodes, a.seed)
     fo = fuel_optimal_ratios(ro, a.fuel_optimal) if a.fuel_optimal > 0 else {}
-    bare = rollout(load_actor(f"bare:{path}")[0], a.episodes, a.seed)
+    bare = rollout(build(f"bare:{path}").actor, a.episodes, a.seed)
     flown = run_campaign({"s": path}, load_scenarios(a.campaign), a.campaign_episodes, a.seed)
     per = {scen: float(np.mean(cells["s"].landed)) * 100 for scen, cells in flown.items()}
     low = min(per, key=per.__getitem__)

@@ -18,8 +18,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from pd_core.experiments.campaign import load_actor  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
+from pd_core.runtime.build import build  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
 from pd_core.teachers.mpc import MPCController  # noqa: E402
 
@@ -32,7 +32,8 @@ def main() -> None:
     ap.add_argument("--dispersions", default="")
     a = ap.parse_args()
     for spec in a.specs:
-        rt, label = load_actor(spec)
+        built = build(spec)
+        rt, label = built.actor, built.label
         if not isinstance(rt, Runtime) or not isinstance(rt.actor, MPCController):
             raise SystemExit(f"{spec}: not an MPC controller behind a runtime layer")
         ro = rollout(rt, a.episodes, a.seed, dispersions=a.dispersions)

@@ -6,7 +6,7 @@ fallback in its last 2 s) would command on the same true states.
                                       [--campaign standard] [--episodes 2000] [--seed 0]
                                       [--last-s 2.0] [--show 3]
 
-Flies the scenario's episodes through `pd_core.experiments.evaluate.rollout`, as `pd-eval
+Flies the scenario's episodes through `pd_core.episodes.rollout`, as `pd-eval
 --dispersions CAMPAIGN` does (episode i on seed seed + i: the same flights), recording every
 decision (`Runtime.step_rows`).
 For the failed and the landed episodes it prints, over the last `--last-s` seconds: the median
@@ -26,10 +26,11 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S
 from pd_core.dispersions import Dispersions, load_scenarios
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
+from pd_core.runtime.build import build
 from pd_core.runtime.decision import SOURCES
 from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
+from pd_core.runtime.policy_file import SHIPPED_POLICY
 from pd_core.teachers.registry import make_controller
 
 MOVING_MPS = 0.2  # a lateral axis faster than this is "moving" for the braking share
@@ -57,7 +58,7 @@ class DecisionLog:
 
 def fly(policy: str, scenario: Dispersions, episodes: int, seed: int) -> list[dict[str, Any]]:
     """Per episode: true states (T+1, 7), flown and proposed actions (T,), sources (T,), landed."""
-    log = DecisionLog(load_policy(policy))
+    log = DecisionLog(build(policy).runtime)
     ro = rollout(log, episodes, seed, dispersions=scenario, keep_trajectories=episodes)
     decided = [np.array(r, dtype=np.int64).reshape(-1, 2) for c in log.chunks for r in c]
     return [

@@ -60,7 +60,7 @@ from pd_core.config import (
     RL_THRUST,
     ThrustLimits,
 )
-from pd_core.env import transition
+from pd_core.lander import transition
 
 HINDSIGHT_MODES = ("lowest", "ocp_time", "touchdown", "none")
 DEFAULT_HINDSIGHT = "lowest"

@@ -1,7 +1,8 @@
 """Joining Ray: a local instance sized to this machine by default, or an existing cluster.
 
 Only the Ray code paths (`pd-sweep`, `pd-eval --ray`, `pd-train --address`) import this module;
-nothing else in pd_core needs Ray.
+nothing else in pd_core needs Ray. It sits low (it imports nothing of pd_core) so that
+the demonstrations and the campaigns share it.
 """
 
 from __future__ import annotations

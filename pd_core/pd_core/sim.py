@@ -1,23 +1,24 @@
 """Episode bookkeeping and command validation for the simulator node (no rclpy).
 
-`Simulator` wraps `PoweredDescentEnv` the way pd_sim_node drives it: episodes are numbered from 1,
-each step waits for a thrust command that names the episode and step it answers, and a command is
-applied only if it is valid for the step being flown and is the first valid one for that step
-(a second command for an answered step, from a second policy node or a stray publisher, is
-rejected as a "conflict", or a "duplicate" when it repeats the first). With `command_source`
-set, only commands from the node of that name fly: a stray publisher cannot take a step even
-when it answers first (rejected as "foreign"). A simulator run has an identity, `lander_id`: a
-command that names another lander (`Command.lander_id`, echoed by the policy from the state it
-answers) is meant for a second simulator on the same names; it is counted apart as foreign
-(`Counters.foreign_commands`, per other lander in `foreign_by_lander`), never judged as stale or
-flown, and not counted as rejected. A command naming no lander ("") is judged as before.
-Anything else is rejected with a reason, counted, and never applied. An initial state is accepted
-only if the OCP would take it (`pd_core.ocp.check_request`: above ground, above the dry mass,
-plausible magnitudes). When a step has to be flown without a fresh command, the last applied
-command is held (`missing_command="hold"`) or zero thrust is used (`"zero"`).
+`Simulator` wraps `pd_core.lander.Lander` the way pd_sim_node drives it: episodes are numbered from
+1, each step waits for a thrust command that names the episode and step it answers, and a command
+is applied only if it is valid for the step being flown and is the first valid one for that step (a
+second command for an answered step, from a second policy node or a stray publisher, is rejected as
+a "conflict", or a "duplicate" when it repeats the first). With `command_source` set, only commands
+from the node of that name fly: a stray publisher cannot take a step even when it answers first
+(rejected as "foreign"). A simulator run has an identity, `lander_id`: a command that names another
+lander (`Command.lander_id`, echoed by the policy from the state it answers) is meant for a second
+simulator on the same names; it is counted apart as foreign (`Counters.foreign_commands`, per other
+lander in `foreign_by_lander`), never judged as stale or flown, and not counted as rejected. A
+command naming no lander ("") is judged as before. Anything else is rejected with a reason,
+counted, and never applied. An initial state is accepted only if the OCP would take it
+(`pd_core.ocp.check_request`: above ground, above the dry mass, plausible magnitudes). When a step
+has to be flown without a fresh command, the last applied command is held
+(`missing_command="hold"`) or zero thrust is used (`"zero"`).
 
 Flying the same seed, initial state and actions through `Simulator` and through
-`PoweredDescentEnv` gives bit-identical states: `Simulator.advance` calls `env.step(action)`.
+`PoweredDescentEnv` (the same `Lander`) gives bit-identical states: `Simulator.advance` calls
+`env.step(action)`.
 
 `pd_core.ticker.FixedRateTicker` is the wall-clock timer of the real-time mode: absolute
 deadlines on the monotonic clock (no drift), missed periods are skipped, lateness is recorded
@@ -36,7 +37,7 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.commands import Command
 from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, StateRange
-from pd_core.env import PoweredDescentEnv, Status
+from pd_core.lander import Lander, Status
 from pd_core.ocp.request import check_request
 from pd_core.reward import missed_limits
 
@@ -182,7 +183,7 @@ def describe_end(status: Status, state: np.ndarray, time_s: float) -> str:
 
 
 class Simulator:
-    """PoweredDescentEnv plus episode numbering, command validation and counters.
+    """A `Lander` plus episode numbering, command validation and counters.
 
     Typical loop: `reset()`; then per step `submit(cmd)` for every command received and
     `advance()` once per period (real time) or once `has_fresh_command` (lockstep).
@@ -220,7 +221,7 @@ class Simulator:
             )
         if not (math.isfinite(max_time_s) and max_time_s >= dt_s):
             raise ValueError(f"max_time_s must be >= dt ({dt_s} s), got {max_time_s!r}")
-        self.env = PoweredDescentEnv(
+        self.env = Lander(
             disturbance=disturbance,
             max_time_s=max_time_s,
             initial_range=initial_range,

@@ -26,11 +26,8 @@ from pd_core.dispersions import (
     load_scenarios,
 )
 from pd_core.disturbance import force_at, sample_knots
-from pd_core.env import (
-    OBSERVATION_SPACE,
-    sample_initial_state,
-    transition,
-)
+from pd_core.env import OBSERVATION_SPACE
+from pd_core.lander import sample_initial_state, transition
 from pd_core.state import check_state, scale_state
 
 

@@ -4,11 +4,10 @@ on lander/guidance_status who decided it (one GuidanceStatus per command).
 Whatever answers flies through `pd_core.runtime.Runtime`: the network (or controller) behind the
 runtime layer the policy file pins, and one `Decision` per step.
 
-The controller is the trained DQN policy (`controller` dqn, the default; loaded with
-`pd_core.load_policy` from `model_path`) or a reference controller of
+The controller is the trained DQN policy (`controller` dqn, the default: the policy file
+`model_path`, or the shipped one) or a reference controller of
 `pd_core.teachers.registry.make_controller` (zemzev, zemzev-vernier, and the MPC teachers where
-pd_core
-has them).
+pd_core has them), built by `pd_core.runtime.build` as pd-eval and campaigns build it.
 A missing or mismatched model, or an unknown controller, stops the node at start-up with one line
 naming the file or the name and what is wrong (exit status 1; a bad parameter type is status 2).
 A state with NaN, infinite or absurd values is logged and gets no command; a state whose status is
@@ -35,7 +34,6 @@ Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from collections import deque
@@ -45,12 +43,12 @@ from typing import Any
 import numpy as np
 from rclpy.event_handler import SubscriptionEventCallbacks
 
-import pd_core
 from pd_core.config import TABLE3
-from pd_core.runtime.config import RuntimeConfig
+from pd_core.runtime.build import CONTROLLER, MODEL_ENV, ROOT_ENV, Built, build
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import SHIELD_MODES, SHIPPED_POLICY, PolicyLoadError
 from pd_core.state import check_state
+from pd_core.teachers.registry import CONTROLLERS
 from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
 from pd_ros_common import diagnostics, names, params, qos
 from pd_ros_common.convert import command_msg, guidance_msg, state_from_msg
@@ -58,7 +56,6 @@ from pd_ros_common.lifecycle import AUTOSTART, ManagedNode
 from pd_ros_common.run import run_node
 
 NODE_NAME = names.POLICY_NODE
-MODEL_ENV = "PD_MODEL_PATH"
 DQN = "dqn"
 
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -71,7 +68,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "model_path": (
         "",
         "Policy file (<name>.pt with <name>.json beside it) of the 'dqn' controller. Empty = "
-        f"the shipped model: ${MODEL_ENV} if set, else $PD_ROOT/{SHIPPED_POLICY} (PD_ROOT is "
+        f"the shipped model: ${MODEL_ENV} if set, else ${ROOT_ENV}/{SHIPPED_POLICY} ({ROOT_ENV} is "
         f"set by env.sh), else {SHIPPED_POLICY} in the source tree the package runs from.",
     ),
     "shield": (
@@ -103,61 +100,19 @@ CHECKS: dict[str, params.Check] = {
 LOG_FIRST = 20  # per kind of problem, log this many one by one, then every 100th
 
 
-def default_model_path() -> Path:
-    """The shipped model: first existing candidate, else the first candidate (for the message)."""
-    if os.environ.get(MODEL_ENV):
-        return Path(os.environ[MODEL_ENV])
-    candidates: list[Path] = []
-    if os.environ.get("PD_ROOT"):
-        candidates.append(Path(os.environ["PD_ROOT"]) / SHIPPED_POLICY)
-    candidates += [parent / SHIPPED_POLICY for parent in Path(__file__).resolve().parents]
-    for c in candidates:
-        if c.is_file():
-            return c
-    return candidates[0]
-
-
-def model_file(name: str, model_path: str) -> str:
-    """The policy file flown by controller `name` ("" for a reference controller)."""
-    if name != DQN:
-        return ""
-    return str(Path(model_path) if model_path else default_model_path())
-
-
-def load_controller(
-    name: str, model_path: str, shield: str = "file", settings: str = ""
-) -> tuple[Runtime, str]:
-    """(the runtime that flies, description); PolicyLoadError if it cannot be made. `settings`
-    "K=V,K=V" changes its runtime config (`RuntimeConfig.with_settings`)."""
+def build_policy(name: str, model_path: str, shield: str = "file", settings: str = "") -> Built:
+    """What flies for the node's parameters (`pd_core.runtime.build`, always behind a
+    `Runtime`): the policy file `model_path` (empty: the shipped one) for 'dqn', else the
+    reference controller `name`; PolicyLoadError in one line if it cannot be built."""
+    spec: str | Path = f"{CONTROLLER}{name}"
     if name == DQN:
-        path = Path(model_path) if model_path else default_model_path()
-        runtime = pd_core.load_policy(path, shield=shield)
-        meta = runtime.metadata
-        what = (
-            f"{path} (network {meta['network']['hidden']}, {runtime.actions.n} actions, "
-            f"code {meta.get('code_version', '?')}"
-        )
-    else:
-        # Optional heavy dependency (the MPC teachers import the OCP solvers): only when asked.
-        from pd_core.teachers.registry import make_controller
-
-        try:
-            controller = make_controller(name)
-        except ValueError as exc:
-            raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from exc
-        # a controller has no file to pin a layer: only "always" puts one around it
-        config = RuntimeConfig() if shield == "always" else RuntimeConfig.off()
-        runtime = Runtime(controller, config, name=name)
-        what = f"reference controller {name} ("
-    if settings:
-        try:
-            config = runtime.config.with_settings(settings)
-        except ValueError as exc:
-            raise PolicyLoadError(str(exc)) from None
-        runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
-        what += f", runtime settings {settings}"
-    layer = "no runtime layer" if runtime.config.is_off else "runtime layer on"
-    return runtime, f"{what}, {layer}, config {runtime.config.digest()})"
+        spec = Path(model_path) if model_path else ""
+    try:
+        return build(spec, shield=shield, settings=settings, layer=True)
+    except PolicyLoadError as exc:
+        if name != DQN and name not in CONTROLLERS:  # the registry's refusal, as a parameter
+            raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from None
+        raise
 
 
 class PolicyNode(ManagedNode):
@@ -171,7 +126,7 @@ class PolicyNode(ManagedNode):
         self._p = params.declare(self, PARAMETERS, CHECKS)
         self.autostart = self._p["autostart"]
         self.controller_name = self._p["controller"]
-        self.model_file = model_file(self._p["controller"], self._p["model_path"])
+        self.model_file = ""  # the policy file flown, once configured ("" for a controller)
         self.policy: Runtime | None = None
         self.ignored = 0  # states heard while not active (never answered)
         self.diagnostics = diagnostics.Diagnostics(
@@ -184,12 +139,11 @@ class PolicyNode(ManagedNode):
 
     def _configure(self) -> str:
         p = self._p
-        self.policy, described = load_controller(
-            p["controller"], p["model_path"], p["shield"], p["shield_settings"]
-        )
+        built = build_policy(p["controller"], p["model_path"], p["shield"], p["shield_settings"])
+        self.policy, self.model_file = built.runtime, str(built.policy_file or "")
         if self.controller_name == DQN:
             # Warm up numpy so the first real state is answered as fast as the rest (not the
-            # reference controllers: an MPC teacher would plan, and remember, a fake flight).
+            # reference controllers: an MPC teacher would solve a plan for nothing).
             self.policy.bare_action((TABLE3.lo + TABLE3.hi) / 2)
         self.config_hash = self.policy.config.digest()
         # (lander_id, episode) the runtime's memory belongs to
@@ -228,7 +182,7 @@ class PolicyNode(ManagedNode):
             self.own(self.create_timer(p["stats_period_s"], self._log_stats))
         # DDS discovery of the simulator takes a moment after start-up; say when it is done.
         self._connect_timer = self.own(self.create_timer(0.05, self._check_connected))
-        return f"policy ready: {described}"
+        return f"policy ready: {built.describe()}"
 
     def _activate(self) -> str:
         return "answering every state"

@@ -78,10 +78,9 @@ def fly_shipped_policy_offline(sim, seed: int, adapt=None):
     by the shipped policy (passed through `adapt`, if given) deciding online on the published
     (observed) state, as the node does."""
     from pd_core.commands import Command
-    from pd_core.runtime.policy_file import load_policy
-    from pd_policy_node.node import default_model_path
+    from pd_core.runtime.build import build
 
-    policy = load_policy(default_model_path())
+    policy = build().runtime  # the shipped policy, as the node finds it
     if adapt is not None:
         policy = adapt(policy)
     episode, _, _ = sim.reset(seed=seed)

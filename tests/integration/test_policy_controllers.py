@@ -9,12 +9,8 @@ import pytest
 from helpers import LoopListener, ProcessSet
 
 from pd_core.env import PoweredDescentEnv
-from pd_core.runtime.config import RuntimeConfig
-from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import load_policy
-from pd_core.teachers.registry import make_controller
+from pd_core.runtime.build import build
 from pd_interfaces.srv import ResetEpisode
-from pd_policy_node.node import default_model_path
 from pd_ros_common.convert import final_state, reset_request
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
@@ -67,11 +63,9 @@ class Loop:
 def offline(
     controller: str, seed: int, steps: int | None = None, shield: str = "always"
 ) -> list[np.ndarray]:
-    if controller == "dqn":
-        ctl = load_policy(default_model_path(), shield=shield)
-    else:
-        config = RuntimeConfig() if shield == "always" else RuntimeConfig.off()
-        ctl = Runtime(make_controller(controller), config)
+    # what the node builds for these parameters (the shipped file for "dqn")
+    spec = "" if controller == "dqn" else f"controller:{controller}"
+    ctl = build(spec, shield=shield, layer=True).runtime
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed)
     states = [info["state"]]

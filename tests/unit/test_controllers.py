@@ -7,7 +7,7 @@ import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
 from pd_core.dispersions import SCENARIOS, Dispersions
-from pd_core.experiments.evaluate import final_quantities, rollout
+from pd_core.episodes import final_quantities, rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.teachers.registry import make_controller

@@ -11,7 +11,7 @@ from pd_core.dqn.config import preset
 from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.train import Trainer, training_reward
 from pd_core.dynamics import step
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.zemzev import ZemZevController
 

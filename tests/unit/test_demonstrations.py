@@ -16,7 +16,7 @@ from pd_core.dqn.demo_memory import (
     recovery_steps,
 )
 from pd_core.dqn.train import training_reward
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy

@@ -10,7 +10,7 @@ import pytest
 from pd_core import dynamics
 from pd_core.config import DT_S, G0_MPS2, ISP_S, TABLE3
 from pd_core.dispersions import SCENARIOS, Dispersions, failure_weights, load_scenarios
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.teachers.zemzev import ZemZevController
 from pd_core.vector_env import make_vector_env
 

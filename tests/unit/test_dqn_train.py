@@ -13,7 +13,7 @@ from train_configs import small_config
 from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.train import Trainer, train
-from pd_core.experiments.evaluate import rollout, summarise
+from pd_core.episodes import rollout, summarise
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy, read_policy

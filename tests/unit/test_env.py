@@ -6,7 +6,8 @@ from gymnasium.utils.env_checker import check_env
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import RL_THRUST, STATE_SCALE, TABLE3
-from pd_core.env import PoweredDescentEnv, Status
+from pd_core.env import PoweredDescentEnv
+from pd_core.lander import Lander, Status
 from pd_core.state import check_state
 from pd_core.vector_env import PoweredDescentVectorEnv, make_vector_env
 
@@ -15,6 +16,24 @@ START = [600.0, -200.0, 2500.0, -40.0, 10.0, -80.0, 2000.0]
 
 def test_gymnasium_env_checker_passes():
     check_env(PoweredDescentEnv(), skip_render_check=True)
+
+
+def test_the_lander_without_gymnasium_flies_the_envs_episodes_to_the_bit():
+    # seeded resets, then an unseeded one that continues the same generator, as Gymnasium's
+    env, lander = PoweredDescentEnv(), Lander()
+    actions = np.random.default_rng(5).integers(0, DEFAULT_ACTIONS.n, size=120)
+    for seed in (11, None, 12345, None):
+        obs_e, info_e = env.reset(seed=seed)
+        obs_l, info_l = lander.reset(seed=seed)
+        np.testing.assert_array_equal(obs_e, obs_l)
+        for a in actions:
+            out_e, out_l = env.step(int(a)), lander.step(int(a))
+            np.testing.assert_array_equal(out_e[0], out_l[0])
+            assert out_e[1:4] == out_l[1:4]
+            np.testing.assert_array_equal(out_e[4]["state"], out_l[4]["state"])
+            if out_e[2] or out_e[3]:
+                break
+        assert env.time_s == lander.time_s > 0
 
 
 def test_action_mapping_is_linear_over_rl_limits():

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from pd_core.env import PoweredDescentEnv
-from pd_core.experiments.evaluate import format_report, rollout, summarise
+from pd_core.episodes import rollout, summarise
+from pd_core.experiments.evaluate import format_report
 from pd_core.teachers.zemzev import ZemZevController
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.dispersions import Dispersions, load_scenarios
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RuntimeConfig
 from pd_core.runtime.latency import (
     LatencyCompensator,

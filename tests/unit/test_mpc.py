@@ -9,7 +9,7 @@ import pytest
 
 from pd_core.demonstrations.open_loop import table1_initial_states
 from pd_core.demonstrations.teacher_flown import mpc_demonstrations
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.teachers.mpc import MPCController, MPCParams
 from pd_core.teachers.registry import CONTROLLERS, make_controller
 from pd_core.teachers.zemzev import ZemZevController

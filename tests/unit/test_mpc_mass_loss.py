@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pd_core.config import RL_THRUST
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import LatencyConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.teachers.mpc import MPCController, MPCParams, brake_limited

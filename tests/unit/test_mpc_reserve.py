@@ -11,7 +11,7 @@ from scipy.linalg import solve_banded
 from pd_core import ocp
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import BRAKE_MARGIN, LAND_SPEED_MPS, RL_THRUST, ThrustLimits
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.ocp.fuel import (
     BrakeEnvelope,
     envelope_excess,

@@ -12,7 +12,7 @@ import pytest
 
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.dispersions import Dispersions
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RuntimeConfig
 from pd_core.runtime.latency import LatencyCompensator
 from pd_core.runtime.layer import Runtime

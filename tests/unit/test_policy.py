@@ -11,7 +11,7 @@ import torch
 import pd_core
 from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.network import QNetwork
-from pd_core.env import sample_initial_state
+from pd_core.lander import sample_initial_state
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.policy_file import PolicyLoadError, load_policy, save_policy
 

@@ -21,10 +21,10 @@ from pd_core.cli import train as pd_train  # noqa: E402
 from pd_core.demonstrations.dagger import student_labels  # noqa: E402
 from pd_core.demonstrations.teacher_flown import controller_demonstrations  # noqa: E402
 from pd_core.dispersions import SCENARIOS  # noqa: E402
+from pd_core.episodes import rollout  # noqa: E402
 from pd_core.experiments.campaign import run_campaign  # noqa: E402
-from pd_core.experiments.evaluate import rollout  # noqa: E402
 from pd_core.experiments.ray_campaign import run_campaign_ray  # noqa: E402
-from pd_core.experiments.ray_session import RayUnavailable, connect  # noqa: E402
+from pd_core.ray_session import RayUnavailable, connect  # noqa: E402
 from pd_core.teachers.zemzev import ZemZevController  # noqa: E402
 
 MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt"

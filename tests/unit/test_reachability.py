@@ -14,7 +14,7 @@ from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.cli import evaluate as pd_eval
 from pd_core.config import DT_S, G0_MPS2, ISP_S, TABLE1
 from pd_core.dispersions import NOMINAL, SCENARIOS, Dispersions, rotation_matrix
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.experiments.reachability import (
     braking_authority,
     delivered_limits,

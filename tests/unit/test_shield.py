@@ -19,8 +19,8 @@ from pd_core.config import DT_S, GRAVITY_MPS2, RL_THRUST
 from pd_core.dispersions import Dispersions, load_scenarios
 from pd_core.dqn.network import QNetwork
 from pd_core.dynamics import step
-from pd_core.experiments.campaign import load_actor
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
+from pd_core.runtime.build import build
 from pd_core.runtime.config import RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import NETWORK
 from pd_core.runtime.layer import Runtime
@@ -166,7 +166,7 @@ def test_the_shipped_policy_lands_a_15_percent_shortfall_by_the_measured_thrust(
     d = Dispersions("thrust15", thrust_error=0.15)
     rates = []
     for on in (1, 0):
-        policy, _ = load_actor(f"set:measured_thrust={on}:{ROBUST}")
+        policy = build(f"set:measured_thrust={on}:{ROBUST}").actor
         rates.append(rollout(policy, 200, 9_800_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.975 and rates[1] <= 0.93, rates
 
@@ -179,7 +179,7 @@ def test_light_landers_in_gusts_touch_down_instead_of_bouncing():
     d = Dispersions("light-gusts", mass_kg=(1500.0, 1700.0), disturbance_scale=4.0)
     rates = []
     for td in (P.touchdown_speed_mps, 0.0):
-        actor, _ = load_actor(f"set:touchdown_speed_mps={td}:shield:controller:zemzev-vernier")
+        actor = build(f"set:touchdown_speed_mps={td}:shield:controller:zemzev-vernier").actor
         rates.append(rollout(actor, 200, 9_700_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.995 and rates[1] <= 0.97, rates
 
@@ -209,7 +209,7 @@ def test_a_light_lander_under_navigation_noise_lands_instead_of_hovering():
         nav_velocity_sigma_mps=0.3,
         nav_mass_sigma_kg=30.0,
     )
-    actor, _ = load_actor("shield:controller:zemzev-vernier")
+    actor = build("shield:controller:zemzev-vernier").actor
     ro = rollout(actor, 40, 9_600_000, dispersions=d)
     assert ro.landed.mean() >= 0.975
 
@@ -285,7 +285,7 @@ def test_the_shipped_policy_lands_light_landers_in_gusts_by_the_mass_handover():
     d = Dispersions("light-gusts", mass_kg=(1350.0, 1500.0), disturbance_scale=4.0)
     rates = []
     for mass in (P.handover_mass_kg, 0.0):
-        policy, _ = load_actor(f"set:handover_mass_kg={mass}:{ROBUST}")
+        policy = build(f"set:handover_mass_kg={mass}:{ROBUST}").actor
         rates.append(rollout(policy, 300, 9_900_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.995 and rates[1] <= 0.985, rates
 
@@ -298,7 +298,7 @@ def test_the_shipped_policy_lands_the_wide_box_corners_it_lost_without_the_hando
     seeds = [50_000_000 + i for i in (1544, 3680, 7318, 7464, 8466, 8729)]
     landed = {}
     for alt in (0.0, 5.0):
-        policy, _ = load_actor(f"set:handover_altitude_m={alt}:{ROBUST}")
+        policy = build(f"set:handover_altitude_m={alt}:{ROBUST}").actor
         ro = rollout(policy, len(seeds), 0, dispersions=box, episode_seeds=seeds)
         landed[alt] = int(ro.landed.sum())
     assert landed == {0.0: 0, 5.0: 6}
@@ -328,8 +328,8 @@ def test_policy_files_fly_behind_the_runtime_config_they_pin(files):
     # the bare network (no layer) would not have braked: the layer decided, and says so
     assert p.bare_action(falling) == decision.proposed != a
     assert decision.source == "brake" and p.counts["brake"] == 1 and p.changed == 1
-    assert load_actor(f"bare:{shielded}")[0].config.is_off
-    assert load_actor(f"shield:{bare}")[0].config == RuntimeConfig()
+    assert build(f"bare:{shielded}").actor.config.is_off
+    assert build(f"shield:{bare}").actor.config == RuntimeConfig()
     with pytest.raises(ValueError, match="shield must be one of file, always, never"):
         load_policy(bare, shield="maybe")
 
@@ -397,7 +397,7 @@ def test_a_reference_controller_flies_behind_the_same_layer():
         latency=RuntimeConfig.off().latency, nav_filter=RuntimeConfig.off().nav_filter
     )
     actor = Runtime(zz, off)
-    assert load_actor("shield:controller:zemzev")[1] == "controller zemzev + shield"
+    assert build("shield:controller:zemzev").label == "controller zemzev + shield"
     want, changed = shield_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
     actor.begin_episodes(len(s))
     got, decisions = actor.step_rows(s, np.arange(len(s)))
@@ -412,11 +412,12 @@ def test_a_reference_controller_flies_behind_the_same_layer():
 def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
     """pd-eval's `set:K=V,...:SPEC`: an ablation by flag, refused in one line where it cannot
     apply (a bare controller, an unknown or malformed setting, an out-of-range value)."""
-    actor, label = load_actor(f"set:nav_filter=0,touchdown_speed_mps=0:{ROBUST}")
+    built = build(f"set:nav_filter=0,touchdown_speed_mps=0:{ROBUST}")
+    actor, label = built.actor, built.label
     assert not actor.config.nav_filter.enabled and actor.config.rules.touchdown_speed_mps == 0.0
     assert actor.latency.nav is None and actor.latency.max_delay_steps == 8
     assert label == "pd_dqn_robust (nav_filter=0,touchdown_speed_mps=0)"
-    ctrl, _ = load_actor("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev")
+    ctrl = build("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev").actor
     assert ctrl.latency is None and ctrl.config.rules.guard_altitude_m == P.guard_altitude_m
     for spec, says in (
         ("set:nav_filter=0:controller:zemzev", "no runtime layer"),
@@ -426,7 +427,7 @@ def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
         (f"set:touchdown_speed_mps=3:{ROBUST}", "touchdown_speed_mps must be"),
     ):
         with pytest.raises(ValueError, match=says) as err:
-            load_actor(spec)
+            build(spec)
         assert "\n" not in str(err.value)
 
 

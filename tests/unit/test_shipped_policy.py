@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from pd_core.dqn.config import PRESETS
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
 

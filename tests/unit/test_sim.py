@@ -10,7 +10,8 @@ import pytest
 
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S, GRAVITY_MPS2
-from pd_core.env import PoweredDescentEnv, Status
+from pd_core.env import PoweredDescentEnv
+from pd_core.lander import Status
 from pd_core.sim import Command, Simulator, check_command, describe_end
 from pd_core.ticker import FixedRateTicker, percentiles_ms
 

@@ -13,7 +13,7 @@ from pd_core.demonstrations.teacher_flown import FractionRecorder
 from pd_core.dqn.actor import TorchGreedy
 from pd_core.dqn.config import check_config, preset
 from pd_core.dqn.network import QNetwork
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy, save_policy

@@ -25,24 +25,11 @@ import numpy as np
 from pd_core import plots
 from pd_core.config import DT_S
 from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
-from pd_core.experiments.campaign import (
-    format_table,
-    load_actor,
-    reachability,
-    run_campaign,
-    table,
-    write_json,
-)
-from pd_core.experiments.evaluate import (
-    Rollouts,
-    describe_layer,
-    format_report,
-    fuel_optimal_ratios,
-    rollout,
-    summarise,
-    to_json,
-)
+from pd_core.episodes import Rollouts, rollout, summarise
+from pd_core.experiments.campaign import format_table, reachability, run_campaign, table, write_json
+from pd_core.experiments.evaluate import describe_layer, format_report, fuel_optimal_ratios, to_json
 from pd_core.experiments.table7 import table7_blocks
+from pd_core.runtime.build import build
 from pd_core.runtime.policy_file import PolicyLoadError
 from pd_core.teachers.registry import CONTROLLERS
 
@@ -141,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     spec = args.model or f"controller:{args.controller}"
     try:
-        actor, name = load_actor(spec)
+        built = build(spec)
+        actor, name = built.actor, built.label
         if args.dispersions:
             return campaign_main(args, spec, args.name or name)
         ro = _rollouts(args, spec, actor)
@@ -175,8 +163,7 @@ def _compared(args: argparse.Namespace) -> dict[str, tuple[str, Rollouts]]:
     out = {}
     for other in args.compare:
         other_name, other_spec = _split(other)
-        other_actor, _ = load_actor(other_spec)
-        out[other_name] = (other_spec, _rollouts(args, other_spec, other_actor))
+        out[other_name] = (other_spec, _rollouts(args, other_spec, build(other_spec).actor))
     return out
 
 
@@ -225,7 +212,7 @@ def campaign_main(args: argparse.Namespace, spec: str, name: str) -> int:
     agents = {name: spec}
     for other in args.compare:
         other_name, other_spec = _split(other)
-        load_actor(other_spec)  # refuse a bad file before flying anything
+        build(other_spec)  # refuse a bad file before flying anything
         agents[other_name] = other_spec
     flown = _fly_campaign(args, agents, scenarios)
     reach = None

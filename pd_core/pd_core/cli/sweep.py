@@ -63,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from pd_core.experiments import sweep  # imports Ray and torch: only when a sweep really runs
-    from pd_core.experiments.ray_session import RayUnavailable, connect
+    from pd_core.ray_session import RayUnavailable, connect
 
     try:
         trials = None

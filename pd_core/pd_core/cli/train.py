@@ -45,7 +45,7 @@ def join_ray(address: str) -> str | None:
     before any work starts: None, or the one-line reason it cannot."""
     if not address:
         return None
-    from pd_core.experiments.ray_session import RayUnavailable, connect  # Ray: only if asked
+    from pd_core.ray_session import RayUnavailable, connect  # Ray: only if asked
 
     try:
         connect(address)

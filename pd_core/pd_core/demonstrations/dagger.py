@@ -28,8 +28,8 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S
 from pd_core.demonstrations.teacher_flown import map_chunks
-from pd_core.env import transition
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
+from pd_core.lander import transition
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.registry import make_controller
@@ -64,6 +64,13 @@ class ShadowTeacher:
         for actor in (self.student, self.teacher):
             if getattr(actor, "takes_thrust_fraction", False):
                 actor.take_thrust_fraction(self._fraction)
+
+    def begin_episode(self) -> None:
+        """Every lander starts a new episode: the student and the teacher forget their memory."""
+        for actor in (self.student, self.teacher):
+            begin = getattr(actor, "begin_episode", None)
+            if begin is not None:
+                begin()
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         s = np.array(states, dtype=float).reshape(-1, 7)

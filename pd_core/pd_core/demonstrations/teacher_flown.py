@@ -7,7 +7,7 @@ dispersions), bare or behind the runtime layer, as 1-step transitions for
 `map_chunks` spreads seeded chunks of fixed size over a process pool: chunk k always holds the same
 episodes (seeds seed + k * chunk ...) flown by a fresh teacher, so the result does not depend on
 the number of workers. Workers are spawned, not forked (the caller may hold torch threads). Given
-a Ray `address`, the chunks run as Ray tasks instead (`pd_core.experiments.ray_session`): the
+a Ray `address`, the chunks run as Ray tasks instead (`pd_core.ray_session`): the
 same chunks, so the same result.
 """
 
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pd_core import ocp
-from pd_core.experiments.evaluate import Rollouts, rollout
+from pd_core.episodes import Rollouts, rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.teachers.registry import make_controller
@@ -36,7 +36,7 @@ def map_chunks(
     """fn(*task) for every task, in order: as Ray tasks when `address` is given (auto,
     host:port, ray://host:port, or local), else in a spawned process pool unless workers <= 1."""
     if address:
-        from pd_core.experiments.ray_session import map_tasks  # imports Ray: only with an address
+        from pd_core.ray_session import map_tasks  # imports Ray: only with an address
 
         return map_tasks(fn, tasks, address)
     n = (os.cpu_count() or 1) if workers is None else workers
@@ -86,6 +86,12 @@ class FractionRecorder:
         self.steps.append(np.array(fraction, dtype=float).reshape(-1))
         if getattr(self.inner, "takes_thrust_fraction", False):
             self.inner.take_thrust_fraction(fraction)
+
+    def begin_episode(self) -> None:
+        """Every lander starts a new episode: `inner` forgets its memory (the fractions stay)."""
+        begin = getattr(self.inner, "begin_episode", None)
+        if begin is not None:
+            begin()
 
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         return self.inner.act_batch(states)
@@ -156,7 +162,7 @@ def controller_demonstrations(
     seed + i, disturbances on; initial state sampled from Table 3 or row i of `initial_states`):
     states, actions, next_states, dones, episode, landed (per episode) and success_rate.
     `dispersions` and `episode_seeds` (env seed of each episode instead of seed + i) as
-    `pd_core.experiments.evaluate.rollout`; `workers` None = every core. `behind_layer`: the
+    `pd_core.episodes.rollout`; `workers` None = every core. `behind_layer`: the
     controller flies behind the default runtime layer (`pd_core.runtime.Runtime`), as a
     student trained on the demonstrations will fly: the actions are the ones flown;
     `layer_settings` change that layer (`RuntimeConfig.with_settings`) and add "fraction" (N,),

@@ -15,7 +15,7 @@ from pd_core.demonstrations.open_loop import load_demos
 from pd_core.demonstrations.teacher_flown import controller_demonstrations
 from pd_core.dqn.config import TrainConfig
 from pd_core.dqn.replay import DemoMemory, nstep_from_episodes
-from pd_core.experiments.evaluate import rollout
+from pd_core.episodes import rollout
 from pd_core.reward import reward as shaped_reward
 from pd_core.runtime.policy_file import load_policy
 from pd_core.state import scale_inputs

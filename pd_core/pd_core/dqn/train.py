@@ -38,7 +38,7 @@ from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
 from pd_core.dqn.run_log import CsvLog, run_folder
 from pd_core.dqn.scenario_outcomes import ScenarioOutcomes
-from pd_core.experiments.evaluate import rollout, summarise
+from pd_core.episodes import rollout, summarise
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import read_policy, save_policy

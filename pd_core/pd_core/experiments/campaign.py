@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from pd_core.dispersions import Dispersions
-from pd_core.experiments.evaluate import (
+from pd_core.episodes import (
     CHUNK_EPISODES,
     SOFT_K_VELOCITY_MPS,
     Actor,
@@ -37,13 +37,8 @@ from pd_core.experiments.evaluate import (
 )
 from pd_core.experiments.reachability import ScenarioReach, campaign_reachability, failed_episodes
 from pd_core.reward import missed_limits
-from pd_core.runtime.config import RuntimeConfig
-from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import load_policy
-from pd_core.teachers.registry import make_controller
+from pd_core.runtime.build import AgentSpec, build
 
-# An agent: a policy file, "controller:<name>", or a picklable factory returning an actor.
-AgentSpec = str | Callable[[], Actor]
 METRICS = (
     ("success_rate", "success %", 100.0, ".1f"),
     ("soft_landing_rate", "soft %", 100.0, ".1f"),
@@ -58,40 +53,6 @@ REACH_HEAD = ("out of reach", "success % of reachable")
 # bench/campaign_sign_test.py down to 90 % success at 2000 episodes a cell), and in the table.
 LISTED_FAILURES_JSON = 200
 LISTED_FAILURES_TEXT = 3
-
-
-def load_actor(spec: AgentSpec) -> tuple[Actor, str]:
-    """(actor, label) of a policy file, `controller:<name>` or a factory. A file flies behind
-    the runtime config it pins (`pd_core.runtime`); `bare:<file>` flies the network alone,
-    `shield:<file>` behind the code's default runtime config, and `shield:controller:<name>` the
-    reference controller behind it. `set:K=V[,K=V...]:<spec>` flies <spec> with those
-    `RuntimeConfig` settings changed (an ablation by flag, e.g.
-    `set:nav_filter.enabled=0,touchdown_speed_mps=0:models/pd_dqn_robust.pt`)."""
-    if callable(spec):
-        return spec(), getattr(spec, "__name__", "agent")
-    if spec.startswith("set:"):
-        settings, _, inner = spec[len("set:") :].partition(":")
-        actor, label = load_actor(inner)
-        if not isinstance(actor, Runtime):
-            raise ValueError(
-                f"runtime settings {settings!r}: {label} has no runtime layer to change "
-                "(a policy file has; a controller has behind shield:controller:NAME)"
-            )
-        config = actor.config.with_settings(settings)
-        return Runtime(actor.actor, config, actor.actions, actor.name, actor.metadata), (
-            f"{label} ({settings})"
-        )
-    if spec.startswith("shield:controller:"):
-        name = spec.split(":", 2)[2]
-        return Runtime(make_controller(name), RuntimeConfig()), f"controller {name} + shield"
-    if spec.startswith("controller:"):
-        name = spec.split(":", 1)[1]
-        return make_controller(name), f"controller {name}"
-    for prefix, mode in (("bare:", "never"), ("shield:", "always")):
-        if spec.startswith(prefix):
-            path = spec[len(prefix) :]
-            return load_policy(path, shield=mode), Path(path).stem
-    return load_policy(spec), Path(spec).stem
 
 
 @dataclass(frozen=True)
@@ -223,10 +184,11 @@ def run_campaign(
     chunk: int = CHUNK_EPISODES,
     progress: bool = False,
 ) -> dict[str, dict[str, Rollouts]]:
-    """The campaign in this process: {scenario: {agent: Rollouts}}."""
+    """The campaign in this process: {scenario: {agent: Rollouts}}, each agent built once
+    (`pd_core.runtime.build`) and flown on every scenario."""
     todo = plan(agents, len(scenarios), episodes, shards, chunk)
     bar = _bar(sum(s.episodes for s in todo), progress)
-    actors = {name: load_actor(spec)[0] for name, spec in agents.items()}
+    actors = {name: build(spec).actor for name, spec in agents.items()}
     results = [
         fly_shard(actors[s.agent], scenarios[s.scenario], seed, s, disturbance, chunk, bar.update)
         for s in todo
@@ -400,13 +362,11 @@ def write_json(t: dict[str, Any], path: str | Path) -> Path:
 
 
 __all__ = [
-    "AgentSpec",
     "Shard",
     "episode_ranges",
     "failures",
     "fly_shard",
     "format_table",
-    "load_actor",
     "merge",
     "metrics",
     "plan",

@@ -17,15 +17,16 @@ import ray  # optional heavy dependency: imported only by the Ray code paths
 from tqdm import tqdm
 
 from pd_core.dispersions import Dispersions
-from pd_core.experiments.campaign import AgentSpec, Shard, fly_shard, load_actor, merge, plan
-from pd_core.experiments.evaluate import CHUNK_EPISODES, Actor, Rollouts
-from pd_core.experiments.ray_session import MAX_RETRIES, cluster_cpus, connect
+from pd_core.episodes import CHUNK_EPISODES, Actor, Rollouts
+from pd_core.experiments.campaign import Shard, fly_shard, merge, plan
+from pd_core.ray_session import MAX_RETRIES, cluster_cpus, connect
+from pd_core.runtime.build import AgentSpec, build
 
 
 @functools.lru_cache(maxsize=8)
 def _cached_actor(spec: str) -> Actor:
     """A worker loads a policy file once, however many shards it flies."""
-    return load_actor(spec)[0]
+    return build(spec).actor
 
 
 def _fly_task(
@@ -36,7 +37,7 @@ def _fly_task(
     disturbance: bool,
     chunk: int,
 ) -> Rollouts:
-    actor = _cached_actor(spec) if isinstance(spec, str) else load_actor(spec)[0]
+    actor = _cached_actor(spec) if isinstance(spec, str) else build(spec).actor
     return fly_shard(actor, scenario, seed, shard, disturbance, chunk)
 
 

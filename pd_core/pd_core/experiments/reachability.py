@@ -2,7 +2,7 @@
 
 Issue 10 lets a scenario leave out of its 99 % target the episodes that are physically out of
 reach, with evidence. An episode is judged from its true start (the state and plant draws that
-`pd_core.experiments.evaluate.rollout` flew, rebuilt by `episode_starts`) in the plant model without
+`pd_core.episodes.rollout` flew, rebuilt by `episode_starts`) in the plant model without
 disturbance, by two one-sided tests:
 
 * **Reachable** (a sufficient condition): a `pd_core.ocp` plan within the episode's delivered
@@ -71,7 +71,7 @@ from pd_core.config import (
 )
 from pd_core.dispersions import Dispersions, EpisodeDraws
 from pd_core.dynamics import step
-from pd_core.experiments.evaluate import Rollouts
+from pd_core.episodes import Rollouts
 from pd_core.reward import landed
 from pd_core.vector_env import make_vector_env
 

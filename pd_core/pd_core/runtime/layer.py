@@ -13,10 +13,13 @@ Each step, for each lander (row):
    decided, and `counts` adds it to its source.
 
 A `Runtime` built with `RuntimeConfig.off()` flies the actor alone. The node, `pd-eval`,
-campaigns and tests all fly a policy file through this class (`load_policy`); `bare_action` is
-the network alone and says so. Imports numpy, and numba for the layer's compiled arithmetic
-(`pd_core.runtime.kernels`, compiled or loaded from numba's cache once per process when the
-first `Runtime` is built): steps 1 and 3-4 are one compiled call each (`kernels_step`).
+campaigns, benches and tests all build what flies with `pd_core.runtime.build` (a policy file
+through `load_policy`, or a controller); `begin_episode(s)` starts the layer's and the actor's
+memory afresh, and `bare_action` is the network alone, says so, and changes nothing.
+
+Imports numpy, and numba for the layer's compiled arithmetic (`pd_core.runtime.kernels`,
+compiled or loaded from numba's cache once per process when the first `Runtime` is built):
+steps 1 and 3-4 are one compiled call each (`kernels_step`).
 """
 
 from __future__ import annotations
@@ -95,6 +98,17 @@ _WARM = False
 
 
 class Actor(Protocol):
+    """What a `Runtime` flies: `act_batch(states (B, 7)) -> actions (B,)`, the actor's decision
+    on the states decided on (it may remember them: an MPC teacher continues its plans).
+
+    An actor with memory also has `begin_episode()` (every lander it flies starts a new
+    episode: forget it all) and `propose(states)` (the actions `act_batch` would return,
+    changing nothing); every actor of pd_core has both (`NumpyQNetwork`, `ZemZevController`,
+    `MPCController`). A memoryless actor may lack them (a wrapper in a test or a bench): the
+    runtime then calls nothing at an episode's start and proposes with `act_batch`. An actor
+    that plans on the thrust the layer counts on has `takes_thrust_fraction` and
+    `take_thrust_fraction(fraction (B,))`, called before each `act_batch` of `step_rows`."""
+
     def act_batch(self, states: np.ndarray) -> np.ndarray: ...
 
 
@@ -125,12 +139,20 @@ class Runtime:
         _warm_up(self.fallback)
 
     def begin_episodes(self, n: int) -> None:
-        """Rows 0..n-1 start new episodes (their memory is cleared)."""
+        """Rows 0..n-1 start new episodes, and no other row is flown until the next call: the
+        layer's memory is n fresh rows and the actor forgets everything (`begin_episode`: an MPC
+        teacher drops every plan). The rows then flown (`step_rows`, any subset of 0..n-1 per
+        step, as landers finish) keep their memory in the layer by row number; an actor that
+        remembers matches its memory to the states it is given (an MPC teacher, by the state
+        each plan predicts), so shifting subsets of rows do not mix two landers."""
         if self.latency is not None:
             self.latency.reset(n)
+        begin = getattr(self.actor, "begin_episode", None)
+        if begin is not None:
+            begin()
 
     def begin_episode(self) -> None:
-        """The one lander flown by `step` starts a new episode."""
+        """The one lander flown by `step` starts a new episode (`begin_episodes(1)`)."""
         self.begin_episodes(1)
 
     def step_rows(self, states: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, Decisions]:
@@ -173,7 +195,7 @@ class Runtime:
 
     def act_rows(self, states: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Actions (B,) for the observed states (B, 7) of rows (B,) (`step_rows` without the
-        decisions: `pd_core.experiments.evaluate.fly_episodes`)."""
+        decisions: `pd_core.episodes.fly_episodes`)."""
         return self.step_rows(states, rows)[0]
 
     def step(self, observation: np.ndarray) -> tuple[int, Decision]:
@@ -183,8 +205,11 @@ class Runtime:
 
     def bare_action(self, observation: np.ndarray) -> int:
         """The network's (or controller's) own action on an observed state (7,): no prediction,
-        no rule, no memory. Not what flies."""
-        return int(self.actor.act_batch(observed_states(observation))[0])
+        no rule, a nominal engine. Not what flies, and no side effect: the layer's memory is not
+        read or written and the actor's is not changed (its `propose`: an MPC teacher answers
+        on a copy of its plans), so the next `step` decides as if it had not been called."""
+        propose = getattr(self.actor, "propose", self.actor.act_batch)
+        return int(propose(observed_states(observation))[0])
 
     def thrust(self, action: int) -> np.ndarray:
         """Thrust (3,) in N of an action index; ValueError if out of range."""

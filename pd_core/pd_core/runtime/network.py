@@ -34,7 +34,8 @@ class NumpyQNetwork:
     A network with the thrust input (`thrust_input`, issue 68) also sees
     `pd_core.state.thrust_input` of the vertical thrust fraction the runtime layer counts on:
     `Runtime.step_rows` hands it over (`take_thrust_fraction`) before each `act_batch`, which
-    uses it once; an `act_batch` without it (`Runtime.bare_action`) sees a nominal engine."""
+    uses it once; an `act_batch` without it, and `propose` (`Runtime.bare_action`), see a nominal
+    engine. It keeps no memory between steps (`begin_episode` has nothing to forget)."""
 
     def __init__(
         self,
@@ -71,9 +72,16 @@ class NumpyQNetwork:
         self._fraction = np.asarray(fraction, dtype=float).reshape(-1)
 
     def q_values(self, states: np.ndarray) -> np.ndarray:
-        """Action values (B, n_actions) of physical states (B, 7); ValueError if invalid. The
-        inputs (scaling, validation and the near-pad features' arguments) are one compiled
-        call (`kernels_step.network_inputs`); the tanh and the layers are numpy's."""
+        """Action values (B, n_actions) of physical states (B, 7), with the thrust fraction
+        handed over for them (`take_thrust_fraction`, used up here); ValueError if invalid."""
+        fraction, self._fraction = self._fraction, None
+        return self._forward(states, fraction)
+
+    def _forward(self, states: np.ndarray, fraction: np.ndarray | None) -> np.ndarray:
+        """Action values (B, n_actions) of physical states (B, 7) with the vertical thrust
+        fraction (B,) counted on (None or another length: a nominal engine). The inputs
+        (scaling, validation and the near-pad features' arguments) are one compiled call
+        (`kernels_step.network_inputs`); the tanh and the layers are numpy's."""
         s = as_state_rows(states)
         b, k = len(s), len(self._near_gain)
         scaled, near = np.empty((b, 7)), np.empty((b, k))
@@ -83,8 +91,7 @@ class NumpyQNetwork:
         h = np.empty((b, 7 + t + k), dtype=self.dtype)
         h[:, :7] = scaled
         if t:
-            f, self._fraction = self._fraction, None
-            h[:, 7] = thrust_input(f) if f is not None and len(f) == b else 0.0
+            h[:, 7] = 0.0 if fraction is None or len(fraction) != b else thrust_input(fraction)
         if k:
             h[:, 7 + t :] = np.tanh(near)
         last = len(self.layers) - 1
@@ -98,3 +105,11 @@ class NumpyQNetwork:
     def act_batch(self, states: np.ndarray) -> np.ndarray:
         """Greedy actions (B,) of physical states (B, 7): the network alone."""
         return self.q_values(states).argmax(axis=-1)
+
+    def propose(self, states: np.ndarray) -> np.ndarray:
+        """Greedy actions (B,) on a nominal engine, changing nothing (a fraction handed over
+        stays for the next `act_batch`): `Runtime.bare_action`."""
+        return self._forward(states, None).argmax(axis=-1)
+
+    def begin_episode(self) -> None:
+        """A new episode: nothing to forget (the network decides on the state alone)."""

@@ -7,7 +7,7 @@ import numpy as np
 
 class RowMemory:
     """Arrays whose first axis is the lander (row), made by `_fresh`: a batch of episodes
-    (`pd_core.experiments.evaluate.fly_episodes`) and the policy node (row 0) share one
+    (`pd_core.episodes.fly_episodes`) and the policy node (row 0) share one
     implementation. `n_rows` is the number of rows held."""
 
     n_rows: int = 0

@@ -41,18 +41,22 @@ flies the plan's first step quantised to one of the 147 actions, and re-plans at
   it brakes and rides outside that limit; a plan inside it costs >= 1.04x the fuel optimum
   (`bench/envelope_floor.py`).
 
-Plans are matched to states, not to row numbers: `pd_core.experiments.evaluate.rollout` passes
+Plans are matched to states, not to row numbers: `pd_core.episodes.rollout` passes
 only the
 landers still flying, so rows shift as episodes end. Each plan remembers the state it predicts
 next (the commanded action, no disturbance); an incoming state continues the plan whose
 prediction is nearest within `continuity_*` (normalised, greedy), and a state that continues no
 plan starts a new episode (a cold solve). Without navigation noise a true continuation is
 within millimetres of its prediction and other episodes are metres or kilograms away, so the
-matching, and hence every action, depends only on the episode's own history.
+matching, and hence every action, depends only on the episode's own history. `begin_episode`
+(called by `Runtime.begin_episode(s)`) forgets every plan, so a state that starts an episode is
+never taken for the continuation of the last one; `propose` is `act_batch` that changes no plan
+(`Runtime.bare_action`).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -77,81 +81,13 @@ from pd_core.ocp.lp import LPSolver
 from pd_core.ocp.model import control_times
 from pd_core.ocp.qp import WarmStart, energy_qp_plan
 from pd_core.state import check_state
+from pd_core.teachers.mpc_params import MPCParams
 
 _ZERO = (0.0, 0.0, 0.0)
 
 
 class Actor(Protocol):
     def act_batch(self, states: np.ndarray) -> np.ndarray: ...
-
-
-@dataclass(frozen=True)
-class MPCParams:
-    """Settings of the receding-horizon teacher (ours; chosen on Table 1/3, see bench/mpc_speed)."""
-
-    objective: str = "fuel"  # "energy" (Eq. 4) or "fuel"
-    control_spacing_s: float = 1.0  # plan control points per second of time-to-go
-    min_control_points: int = 4
-    max_control_points: int = 40
-    passes: int = 1  # SQP (energy) or LP (fuel) passes per warm re-plan
-    # fuel LPs start from the last LP's optimal basis: 17 -> 15 simplex iterations, no faster
-    # (bench/mpc_speed.py --lp), and a tied optimum may change vertex: off
-    warm_lp: bool = False
-    # plans use this fraction of the RL thrust limits: the rest is authority to correct the
-    # quantisation and the disturbance (a fuel-optimal plan brakes at its limit to the end)
-    plan_thrust_fraction: float = 0.9
-    # the vertical axis's fraction where it differs (None: plan_thrust_fraction): the reserve
-    # the runtime layer's braking limit counts on is a vertical one (RulesConfig.thrust_margin)
-    vertical_thrust_fraction: float | None = None
-    # quantise within the runtime layer's braking limit (`pd_core.runtime.rules.brake_mask` at
-    # the default RulesConfig, full thrust delivered): a vertical level the limit would raise
-    # is raised here, so the layer and the teacher agree (see `brake_limited`)
-    keep_brake_limit: bool = False
-    # ... that limit counting on the mass lost while braking (`RulesConfig.brake_mass_loss`,
-    # issue 68): raise where `brake_limited(..., mass_loss=True)` fires (off: the limit at the
-    # mass now, as every teacher flew before)
-    brake_mass_loss: bool = False
-    # ... and on the fraction of the vertical thrust the runtime layer counts on this step
-    # (`Decision.thrust_gain_bound`: the identified gain, at most `unmeasured_thrust` until
-    # measured), which a `Runtime` hands to an actor that takes it (`take_thrust_fraction`);
-    # off, or flown without the layer: full thrust delivered, as before
-    layer_thrust_fraction: bool = False
-    # fuel plans keep this far (m/s) inside that braking limit (`ocp.fuel.BrakeEnvelope`,
-    # elastic, on the fraction counted on and, with `brake_mass_loss`, the mass lost while
-    # braking) instead of only quantising inside it; None: off (the plans as before)
-    plan_brake_margin_mps: float | None = None
-    # plans end at rest this high above the pad (a "low gate"): rest exactly on the pad at t_f
-    # asks for infinite precision at t_f -> 0, and a plan that brakes at its limit to the
-    # ground leaves nothing for the quantisation and the disturbance
-    gate_altitude_m: float = 2.0
-    terminal_time_s: float = 1.0  # below this time-to-go the fallback law lands
-    # fuel plans hold the horizontal thrust at 0 over their last this many seconds, so the
-    # horizontal motion ends before the fallback lands (a fuel-optimal plan brakes it last,
-    # in the seconds the fallback flies); 0: off (see `fuel_lp_plan`)
-    lateral_settle_s: float = 0.0
-    terminal_altitude_m: float = 0.5  # ... or below this height above the gate
-    # the time-to-go above is the state's (`time_to_rest_s`: braking evenly to rest at the
-    # gate), not the plan's: the hand-over is then a function of the state a student sees
-    handover_from_state: bool = False
-    # "eq5" (reference carried), "eq5-replan" (reference reset each step) or "nearest" (the
-    # nearest level, not the paper's; measured beside them in bench/mpc_speed.py)
-    rounding: str = "eq5"
-    reference_clip_mps: float = 1.0  # |v* - v| carried into Eq. 6 at most (anti-windup)
-    floor_every: int = 10  # fuel plans keep z >= gate at every 10th step (and the last 10)
-    # a plan dipping more than this below the gate (between the floor's steps, or an energy
-    # plan) is refused: 2 m below the gate is the ground
-    underground_m: float = 2.0
-    tf_step_s: float = 0.4  # t_f trial step of the warm re-plans (0: the known time-to-go only)
-    tf_trial_every: int = 2  # ... tried on every this many re-plans (each trial is a 2nd solve)
-    # warm re-plans tried in order, (full RL limits?, extra time s): the known time-to-go
-    # within the margin, then the margin spent (a plan at its limit that the lander fell
-    # behind), then more time
-    recovery: tuple[tuple[bool, float], ...] = ((False, 0.0), (True, 0.0), (True, 1.0), (True, 3.0))
-    # a state continues a plan when it is within these of the plan's prediction (navigation
-    # noise of the `nav-noise` dispersion: 1 m, 10 kg; disturbance: millimetres)
-    continuity_m: float = 5.0
-    continuity_mps: float = 2.0
-    continuity_kg: float = 50.0
 
 
 @dataclass
@@ -182,7 +118,9 @@ class ReplanStats:
 
 
 class MPCController:
-    """Closed-loop teacher with the interface of `ZemZevController`: act, act_batch, thrust."""
+    """Closed-loop teacher with the interface of `ZemZevController` (act, act_batch, thrust,
+    propose, begin_episode); its memory is the plans of the episodes in flight (see the module
+    docstring), forgotten by `begin_episode`, never touched by `propose`."""
 
     def __init__(
         self,
@@ -232,9 +170,26 @@ class MPCController:
         of the next `act_batch` call (used once, by `keep_brake_limit`)."""
         self._fraction = np.asarray(fraction, dtype=float).reshape(-1)
 
-    def reset(self) -> None:
-        """Forget every plan (the next call starts cold)."""
+    def begin_episode(self) -> None:
+        """Every lander flown starts a new episode: forget every plan (each next state starts
+        cold) and any thrust fraction handed over and not used. `Runtime.begin_episode(s)`
+        calls it; `stats` keeps counting."""
         self._rows = []
+        self._fraction = None
+
+    def propose(self, states: np.ndarray) -> np.ndarray:
+        """The actions (B,) `act_batch` would return for physical states (B, 7) on the plans
+        held now, at full thrust, changing nothing: the plans, the thrust fraction handed over,
+        `stats` and the LP's warm basis are put back as they were (`Runtime.bare_action`). It
+        flies `act_batch` on a copy of the plans (a continued plan is changed in place) with a
+        shallow copy of the LP solver (the same HiGHS object, which each LP re-loads whole)."""
+        held = self._rows, self._fraction, self._row_fraction, self.stats, self._highs
+        self._rows, self._fraction = copy.deepcopy(self._rows), None
+        self.stats, self._highs = ReplanStats(), copy.copy(self._highs)
+        try:
+            return self.act_batch(states)
+        finally:
+            self._rows, self._fraction, self._row_fraction, self.stats, self._highs = held
 
     def thrust(self, action: int) -> np.ndarray:
         return self.actions.thrust(int(action))

@@ -10,16 +10,23 @@ counts on the mass lost while braking, on the vertical thrust fraction its runti
 on (`RESERVE_STATE_ML_PARAMS`); without a layer it counts on full thrust.
 `mpc-fuel-reserve-state-ml-plan` also plans inside that limit (`RESERVE_STATE_ML_PLAN_PARAMS`);
 `mpc-fuel-reserve-state-lf` keeps the limit at the mass now on that fraction.
+
+Importing the registry loads no solver: the teachers' settings are plain dataclasses
+(`pd_core.teachers.mpc_params`), and the teacher (`pd_core.teachers.mpc`, which imports the OCP
+solvers) is imported when an MPC controller is built. A ZEM/ZEV controller needs numpy only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
-from pd_core import ocp
-from pd_core.teachers.mpc import Actor, MPCController, MPCParams
+from pd_core.teachers.mpc_params import MPCParams
 from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController
+
+if TYPE_CHECKING:
+    from pd_core.teachers.mpc import Actor, MPCController
 
 
 def mpc_controller(objective: str, fallback: Actor) -> MPCController:
@@ -28,6 +35,10 @@ def mpc_controller(objective: str, fallback: Actor) -> MPCController:
     energy plans are smooth and the reference-carrying Eq. 5 ("eq5") tracks them; the bang-bang
     fuel plans sit at their thrust limit, where a carried reference lets the lander fall
     behind, so the fuel teacher takes its reference from the plan just made ("eq5-replan")."""
+    # optional heavy dependency: the teacher imports the OCP solvers, loaded when one is built
+    from pd_core import ocp
+    from pd_core.teachers.mpc import MPCController
+
     if objective not in ocp.OBJECTIVES:
         raise ValueError(f"objective must be one of {ocp.OBJECTIVES}, got {objective!r}")
     rounding = "eq5" if objective == "energy" else "eq5-replan"
@@ -91,6 +102,8 @@ def reserve_controller(
       the horizontal motion ends before the fallback lands the rest, where the fuel optimum
       braked it last.
     """
+    from pd_core.teachers.mpc import MPCController  # optional heavy dependency (the solvers)
+
     ctl = MPCController(params, fallback)
     ctl.name = name
     return ctl
@@ -126,7 +139,8 @@ CONTROLLERS = tuple(FACTORIES)
 
 
 def make_controller(name: str) -> ZemZevController | MPCController:
-    """A fresh controller by name (MPC controllers keep plans: one per campaign or episode)."""
+    """A fresh controller by name; ValueError naming the known ones if there is none. MPC
+    controllers keep the plans of the episodes in flight (`begin_episode` forgets them)."""
     if name not in FACTORIES:
         raise ValueError(f"unknown controller {name!r}; choose from {', '.join(CONTROLLERS)}")
     return FACTORIES[name]()

@@ -150,8 +150,9 @@ def lateral_brake_accel_mps2(
 
 
 class ZemZevController:
-    """Greedy-style interface of `pd_core.runtime.policy_file.Policy`: `act`, `act_batch`,
-    `thrust`."""
+    """The actor interface the runtime layer flies (`pd_core.runtime.layer.Actor`): `act_batch`
+    and `act`, `propose`, `begin_episode`, `thrust`. A function of the state alone: it keeps no
+    memory, so `propose` is `act_batch` and `begin_episode` has nothing to forget."""
 
     def __init__(
         self, params: ZemZevParams | None = None, actions: ActionSpace = DEFAULT_ACTIONS
@@ -199,6 +200,13 @@ class ZemZevController:
         frac = np.clip((t - self._lo) / (self._hi - self._lo), 0.0, 1.0)
         levels = np.rint(frac * (self._n - 1)).astype(np.int64)
         return self.actions.levels_to_action(levels)
+
+    def propose(self, states: np.ndarray) -> np.ndarray:
+        """`act_batch` (it changes nothing): `Runtime.bare_action`."""
+        return self.act_batch(states)
+
+    def begin_episode(self) -> None:
+        """A new episode: nothing to forget (the law keeps no memory)."""
 
     def act(self, state: np.ndarray) -> int:
         return int(self.act_batch(np.asarray(state, dtype=float).reshape(1, 7))[0])
