@@ -5,7 +5,7 @@
 # Runs in the repository root with the package on PYTHONPATH (no colcon build needed). In order:
 #   0. wheels carried in .whl/ (gymnasium, highspy: the GPU machine has no PyPI) into /tmp/site;
 #   1. the machine: GPU, torch, numpy, numba;
-#   2. the CUDA tests of tests/unit/test_dqn_device.py and tests/unit/test_device_loop.py (the
+#   2. the CUDA tests of tests/unit/dqn/test_dqn_device.py and tests/unit/dqn/test_device_loop.py (the
 #      graph block agrees with the eager block, and with the CPU), which skip without a GPU;
 #   3. bench/train_speed.py --device-loop --gpu-only: updates/s of the plain loop, the graph
 #      path and the device loop for K in {1, 8, 32, 128}, one and four agents together;
@@ -84,8 +84,8 @@ torch.__version__, '| cuda', torch.cuda.is_available(), '| numpy', numpy.__versi
 
 if [[ $checks == 1 ]]; then
     echo "== 2. CUDA tests"
-    "$py" -m pytest -q -p no:cacheprovider -k "cuda or gpu" tests/unit/test_dqn_device.py \
-        tests/unit/test_device_loop.py 2>&1 | tee "$out/tests.log" ||
+    "$py" -m pytest -q -p no:cacheprovider -k "cuda or gpu" tests/unit/dqn/test_dqn_device.py \
+        tests/unit/dqn/test_device_loop.py 2>&1 | tee "$out/tests.log" ||
         echo "paper_on_gpu.sh: the CUDA tests failed; training anyway"
     echo "== 3. bench/train_speed.py --device-loop"
     "$py" bench/train_speed.py --device-loop --gpu-only --seconds 1 --agents 1 4 2>&1 |

@@ -463,7 +463,7 @@ def brake_limited(
     state s (7,): `pd_core.envelope.brake_fires` (one step of the command counted at `margin`,
     against the limit of margin x max_vertical_thrust_n, at the mass now or, with mass_loss,
     counting on the mass lost while braking), the law the layer compiles
-    (tests/unit/test_mpc_reserve.py checks they agree)."""
+    (tests/unit/teachers/test_mpc_reserve.py checks they agree)."""
     fired = envelope.brake_fires(
         float(s[2]), float(s[5]), float(s[6]), margin * vertical_thrust_n,
         margin * max_vertical_thrust_n, land_speed_mps, touchdown_speed_mps,

@@ -11,7 +11,7 @@ from pd_core.episodes import rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.policy_file import SHIPPED_POLICY, load_policy
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 MODEL = (ROOT / SHIPPED_POLICY).with_suffix("")
 STAGE2 = ROOT / "models" / "pd_dqn_ocp"
 TEACHER = PRESETS["ocp"]["controller"]  # the recipe's teacher, mpc-fuel-reserve-state

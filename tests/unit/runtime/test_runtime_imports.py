@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROBUST = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust"
+ROBUST = Path(__file__).resolve().parents[3] / "models" / "pd_dqn_robust"
 HEAVY = ("scipy", "highspy", "gymnasium", "pd_core.ocp", "pd_core.teachers.mpc", "pd_core.env")
 
 PROBE = f"""

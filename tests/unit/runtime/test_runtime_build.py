@@ -18,7 +18,7 @@ from pd_core.teachers.mpc import MPCController
 from pd_core.teachers.registry import CONTROLLERS
 from pd_core.teachers.zemzev import ZemZevController
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ROBUST = ROOT / "models" / "pd_dqn_robust.pt"
 # hovering 60 m up: one step later the lander is within the MPC's continuity of where it was,
 # so a teacher that kept its plan would take this state for that plan's continuation

@@ -16,7 +16,7 @@ from pd_core.runtime.policy_file import load_policy
 from pd_core.runtime.rules import decide
 from pd_core.vector_env import make_vector_env
 
-OCP = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_ocp.pt"
+OCP = Path(__file__).resolve().parents[3] / "models" / "pd_dqn_ocp.pt"
 
 
 def test_the_fused_decision_flies_what_the_stages_composed_fly():

@@ -21,7 +21,7 @@ from pd_core.runtime.policy_file import load_policy
 
 WARM_STEPS = NavFilterConfig().warm_steps
 
-ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
+ROBUST = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_robust.pt")
 STEPS = 150
 
 

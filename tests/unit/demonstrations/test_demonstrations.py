@@ -71,7 +71,7 @@ def test_demo_memory_splits_episodes_between_teachers() -> None:
     assert len(memory) == sum(c["transitions"] for c in info["controller"])
 
 
-POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+POLICY = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_best.pt")
 
 
 def test_recovery_demonstrations_start_on_the_students_own_paths() -> None:

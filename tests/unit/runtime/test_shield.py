@@ -40,7 +40,7 @@ G = -GRAVITY_MPS2[2]
 TZ = RL_THRUST.max_n[2]
 P = RulesConfig()
 BRAKE_ONLY = RulesConfig(guard_altitude_m=0.0, handover_altitude_m=0.0)
-ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
+ROBUST = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_robust.pt")
 FALLBACK = ZemZevController(VERNIER_PARAMS)
 
 

@@ -15,7 +15,7 @@ from pd_core.episodes import rollout
 from pd_core.runtime.policy_file import load_policy
 from pd_core.teachers.zemzev import ZemZevController
 
-POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+POLICY = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_best.pt")
 
 
 def test_labels_are_the_teachers_actions_on_the_states_the_student_flies() -> None:

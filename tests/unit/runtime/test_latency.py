@@ -39,7 +39,7 @@ def with_config(runtime: Runtime, config: RuntimeConfig) -> Runtime:
     return Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)
 
 
-ROBUST = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_robust.pt")
+ROBUST = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_robust.pt")
 
 
 @pytest.mark.parametrize(("thrust_model", "atol"), [(False, 1e-9), (True, 1e-2)])

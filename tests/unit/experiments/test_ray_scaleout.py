@@ -27,7 +27,7 @@ from pd_core.experiments.ray_campaign import run_campaign_ray  # noqa: E402
 from pd_core.ray_session import RayUnavailable, connect  # noqa: E402
 from pd_core.teachers.zemzev import ZemZevController  # noqa: E402
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt"
+MODEL = Path(__file__).resolve().parents[3] / "models" / "pd_dqn_best.pt"
 OCP_MODEL = MODEL.with_name("pd_dqn_ocp.pt")
 FIELDS = ("initial_states", "final_states", "landed", "terminated", "steps", "returns")
 

@@ -19,7 +19,7 @@ from pd_core.runtime.layer import Runtime
 from pd_core.runtime.policy_file import load_policy, read_policy
 
 torch.set_num_threads(1)
-NOMINAL_POLICY = str(Path(__file__).resolve().parents[2] / "models" / "pd_dqn_best.pt")
+NOMINAL_POLICY = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_best.pt")
 
 
 def _small(tmp_path, name: str, **kw) -> TrainConfig:
