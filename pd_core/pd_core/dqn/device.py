@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from pd_core.dqn.agent import DQNAgent
+from pd_core.dqn.minibatch import DEMO, REPLAY, minibatch_plan
 from pd_core.dqn.replay import ReplayMemory
 
 WARMUP_STEPS = 3
@@ -195,18 +196,18 @@ class DeviceUpdate:
         if plan is not None:
             return plan
         cfg = self.agent.cfg
-        if pretraining:
-            if self.demo is None:
-                raise ValueError("pre-training needs a demonstration memory")
-            parts, demo_from = [(self.demo, cfg.batch_agent + cfg.batch_demo)], 0
-        else:
+        rows = minibatch_plan(
+            cfg.batch_agent,
+            cfg.batch_demo,
+            cfg.margin,
+            has_demo=self.demo is not None,
+            pretraining=pretraining,
+        )
+        if not pretraining:
             self._plans.pop(True, None)  # pre-training is over: free its graph
-            parts, demo_from = [(self.replay, cfg.batch_agent)], None
-            if self.demo is not None and cfg.batch_demo > 0:
-                parts.append((self.demo, cfg.batch_demo))
-                demo_from = cfg.batch_agent
-        margin_from = demo_from if cfg.margin > 0.0 else None
-        plan = self._plans[pretraining] = _Plan(parts, margin_from, self.agent.device)
+        memories = {REPLAY: self.replay, DEMO: self.demo}
+        parts = [(memories[m], n) for m, n in rows.parts]
+        plan = self._plans[pretraining] = _Plan(parts, rows.margin_from, self.agent.device)
         return plan
 
     def _draw(self, plan: _Plan) -> None:

@@ -53,6 +53,7 @@ from pd_core.dqn.config import TrainConfig, check_config, preset
 from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.device import describe_device, resolve_device
 from pd_core.dqn.device_checkpoint import loop_state, read_loop_checkpoint, restore
+from pd_core.dqn.minibatch import DEMO, REPLAY, MinibatchPlan, minibatch_plan
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import ReplayMemory
 from pd_core.dqn.run_log import RunLogs, run_folder
@@ -300,10 +301,23 @@ class DeviceLoop:
         size = np.zeros((len(self.agents), self.batch))
         base = np.zeros((len(self.agents), self.batch), dtype=np.int64)
         for i, agent in enumerate(self.agents):
-            k = agent.cfg.batch_agent
-            size[i, :k], base[i, :k] = max(agent.replay_size, 1), i * self.region + self.demo_rows
-            size[i, k:], base[i, k:] = max(agent.demo_size, 1), i * self.region
+            # a region: the demonstrations' rows first, then the replay memory's
+            first = {REPLAY: i * self.region + self.demo_rows, DEMO: i * self.region}
+            held = {REPLAY: agent.replay_size, DEMO: agent.demo_size}
+            col = 0
+            for memory, rows in self._plan(agent).parts:
+                size[i, col : col + rows] = max(held[memory], 1)
+                base[i, col : col + rows] = first[memory]
+                col += rows
+            size[i, col:], base[i, col:] = 1, i * self.region  # columns no draw fills
         return size, base
+
+    @staticmethod
+    def _plan(agent: AgentState) -> MinibatchPlan:
+        cfg = agent.cfg
+        return minibatch_plan(
+            cfg.batch_agent, cfg.batch_demo, cfg.margin, has_demo=agent.demo_size > 0
+        )
 
     def _init_buffers(self) -> None:
         a, k, b, dev = len(self.agents), self.k, self.batch, self.device
@@ -492,10 +506,8 @@ class DeviceLoop:
             for i, agent in enumerate(self.agents):
                 if j >= owed[i]:
                     continue
-                k = agent.cfg.batch_agent
-                ix = [agent.rng.integers(0, agent.replay_size, size=k)]
-                if agent.demo_size:
-                    ix.append(agent.rng.integers(0, agent.demo_size, size=agent.cfg.batch_demo))
+                held = {REPLAY: agent.replay_size, DEMO: agent.demo_size}
+                ix = [agent.rng.integers(0, held[m], size=n) for m, n in self._plan(agent).parts]
                 self.h_idx[j, i] = torch.from_numpy(np.concatenate(ix) + base[i])
         self.idx.copy_(self.h_idx)
 

@@ -34,6 +34,7 @@ from pd_core.dqn.config import TrainConfig, check_config
 from pd_core.dqn.demo_memory import build_demo_memory, label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
 from pd_core.dqn.loop import TrainingLoop
+from pd_core.dqn.minibatch import DEMO, REPLAY, minibatch_plan
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
 from pd_core.dqn.run_log import CsvLog, run_folder
@@ -361,14 +362,22 @@ class Trainer(TrainingLoop):
         return self._q_cpu
 
     def sample(self, pretraining: bool = False) -> ReplaySample:
+        """One update's minibatch, drawn from the memories in the order of `minibatch_plan`."""
         cfg = self.cfg
-        if pretraining:
-            assert self.demo is not None
-            return self.demo.sample(cfg.batch_agent + cfg.batch_demo, self.rng)
-        a = self.replay.sample(cfg.batch_agent, self.rng)
-        if self.demo is None or cfg.batch_demo == 0:
-            return a
-        return concat_samples(a, self.demo.sample(cfg.batch_demo, self.rng))
+        plan = minibatch_plan(
+            cfg.batch_agent,
+            cfg.batch_demo,
+            cfg.margin,
+            has_demo=self.demo is not None,
+            pretraining=pretraining,
+        )
+        memories = {REPLAY: self.replay, DEMO: self.demo}
+        out: ReplaySample | None = None
+        for memory, rows in plan.parts:
+            part = memories[memory].sample(rows, self.rng)
+            out = part if out is None else concat_samples(out, part)
+        assert out is not None
+        return out
 
     def evaluate(self, episodes: int | None = None, seed: int | None = None) -> dict[str, float]:
         """Greedy evaluation on seeded episodes (the periodic one of `run`)."""
