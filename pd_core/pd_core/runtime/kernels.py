@@ -12,8 +12,9 @@ repeats, for one lander, `braking_accel_mps2` and `lateral_brake_accel_mps2` of
 `pd_core.teachers.zemzev`. One decision of one lander costs microseconds instead of ~400 small
 numpy calls.
 
-Settings arrive as arrays of floats (`consts()`, and each module's own): nothing from a config
-is frozen into the compiled code. `cache=True` keeps the machine code next to this file: a fresh
+Settings arrive as arrays of floats (`consts()`, and each module's own) and scalars, in named
+tuples with the memory they act on (`pd_core.runtime.kernels_state`): nothing from a config is
+frozen into the compiled code. `cache=True` keeps the machine code next to this file: a fresh
 process imports numba (0.4 s) and loads the kernels (0.15 s; `pd_core.runtime.layer` does, when
 the first `Runtime` is built); after an edit of this file the first process compiles them again
 (about 10 s).

@@ -8,6 +8,7 @@ import numpy as np
 
 from pd_core.runtime.kernels import _DT, _G, _dot3, _matvec, njit, step_nominal
 from pd_core.runtime.kernels_nav import _nav_row
+from pd_core.runtime.kernels_state import LatencyMemory, LatencySettings, NavMemory, NavModel
 
 
 @njit(cache=True)
@@ -77,20 +78,14 @@ def window_bounds(
 
 @njit(cache=True)
 def thrust_scale_rows(
-    rows: np.ndarray,
-    delay: np.ndarray,
-    gain: np.ndarray,
-    cov: np.ndarray,
-    win_sums: np.ndarray,
-    n_sd: float,
-    min_evidence: float,
-    noise2: float,
-    unmeasured: float,
-    measured_sd: float,
+    rows: np.ndarray, memory: LatencyMemory, settings: LatencySettings, n_sd: float
 ) -> np.ndarray:
     """(B,) vertical thrust scale of rows (B,): the lag's vertical gain + n_sd sd, or the
-    window bound where lower, at most `unmeasured` while that sd is not below `measured_sd`
-    (`LatencyCompensator.vertical_thrust_scale`)."""
+    window bound where lower, at most `settings.unmeasured_thrust` while that sd is not below
+    `settings.measured_gain_sd` (`LatencyCompensator.vertical_thrust_scale`)."""
+    delay, gain, cov, win_sums = memory.delay, memory.gain, memory.cov, memory.win_sums
+    min_evidence, noise2 = settings.window_min_evidence, settings.window_noise2
+    unmeasured, measured_sd = settings.unmeasured_thrust, settings.measured_gain_sd
     out = np.empty(len(rows))
     for b in range(len(rows)):
         r = rows[b]
@@ -122,22 +117,16 @@ def _observe_row(
     r: int,
     dv: np.ndarray,
     mass: float,
-    issued: np.ndarray,
-    score: np.ndarray,
-    delay: np.ndarray,
-    gain: np.ndarray,
-    cov: np.ndarray,
-    force_var: np.ndarray,
-    win: np.ndarray,
-    win_steps: np.ndarray,
-    win_sums: np.ndarray,
-    p: np.ndarray,
-    c: np.ndarray,
+    memory: LatencyMemory,
+    settings: LatencySettings,
     work: np.ndarray,
 ) -> None:
     """Row r saw the velocity change dv (3,) over the last step at `mass`: score the lags,
     identify their thrust matrices, move the lag estimate where the evidence says (by the
-    switch margin), add the step to the window. work: scratch (>= lags + 12,)."""
+    switch margin), add the step to the window (into `memory`). work: scratch (>= lags + 12,)."""
+    issued, score, delay, gain = memory.issued, memory.score, memory.delay, memory.gain
+    cov, force_var, win, win_steps = memory.cov, memory.force_var, memory.win, memory.win_steps
+    win_sums, p, c = memory.win_sums, settings.params, settings.dynamics
     dt = c[_DT]
     lags = issued.shape[1]
     thrust_model = p[1] > 0.0
@@ -208,38 +197,18 @@ def predict_rows(
     obs: np.ndarray,
     out: np.ndarray,
     jumped: np.ndarray,
-    issued: np.ndarray,
-    last: np.ndarray,
-    score: np.ndarray,
-    delay: np.ndarray,
-    gain: np.ndarray,
-    cov: np.ndarray,
-    force_var: np.ndarray,
-    win: np.ndarray,
-    win_steps: np.ndarray,
-    win_sums: np.ndarray,
-    p: np.ndarray,
-    has_nav: bool,
-    nx: np.ndarray,
-    ncov: np.ndarray,
-    z1: np.ndarray,
-    z2: np.ndarray,
-    a1: np.ndarray,
-    d2_sq: np.ndarray,
-    nsteps: np.ndarray,
-    noise_var: np.ndarray,
-    engaged: np.ndarray,
-    nav_p: np.ndarray,
-    f: np.ndarray,
-    bvec: np.ndarray,
-    q: np.ndarray,
-    p0: np.ndarray,
-    c: np.ndarray,
+    memory: LatencyMemory,
+    settings: LatencySettings,
+    nav_memory: NavMemory,
+    nav_model: NavModel,
 ) -> bool:
     """`LatencyCompensator.predict` of rows (B,) observed in states obs (B, 7): the states to
-    decide on into out (B, 7). First, rows whose observation is more than the jump distance
-    from where they were heading are marked in jumped (B,) and, if any, nothing else is done
-    and False is returned (the caller clears them and calls again)."""
+    decide on into out (B, 7), starting from the navigation filter's (nav_memory, nav_model)
+    where `settings.nav`. First, rows whose observation is more than the jump distance from
+    where they were heading are marked in jumped (B,) and, if any, nothing else is done and
+    False is returned (the caller clears them and calls again)."""
+    issued, last, delay, gain = memory.issued, memory.last, memory.delay, memory.gain
+    p, has_nav, c = settings.params, settings.nav, settings.dynamics
     dt = c[_DT]
     any_jump = False
     for b in range(len(rows)):
@@ -267,10 +236,7 @@ def predict_rows(
         if max_delay > 0 and not np.isnan(last[r, 0]):
             for i in range(3):
                 dv[i] = o[3 + i] - last[r, 3 + i]
-            _observe_row(
-                r, dv, last[r, 6], issued, score, delay, gain, cov, force_var, win, win_steps,
-                win_sums, p, c, work,
-            )  # fmt: skip
+            _observe_row(r, dv, last[r, 6], memory, settings, work)
         for i in range(7):
             last[r, i] = o[i]
         lag = delay[r]
@@ -282,10 +248,7 @@ def predict_rows(
                 thr[:] = u
             for i in range(3):
                 acc[i] = thr[i] / o[6] + c[_G + i]
-            _nav_row(
-                r, o, acc, out[b], nx, ncov, z1, z2, a1, d2_sq, nsteps, noise_var, engaged,
-                nav_p, f, bvec, q, p0, c, work,
-            )  # fmt: skip
+            _nav_row(r, o, acc, out[b], nav_memory, nav_model, work)
         else:
             out[b, :] = o
         for k in range(lag):  # through the queued commands, oldest first

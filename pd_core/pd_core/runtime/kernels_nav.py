@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from pd_core.runtime.kernels import _DT, _DT2, _dot3, njit
+from pd_core.runtime.kernels_state import NavMemory, NavModel
 
 # ---- navigation filter ------------------------------------------------------------------------
-# nav parameters (float array): [warm_steps, forget, floor pos, floor vel, prior pos, prior vel]
+# nav parameters (`NavModel.params`): [warm_steps, forget, floor pos, floor vel, prior pos,
+# prior vel]
 
 
 @njit(cache=True)
@@ -17,26 +19,16 @@ def _nav_row(
     obs: np.ndarray,
     acc: np.ndarray,
     out: np.ndarray,
-    x: np.ndarray,
-    cov: np.ndarray,
-    z1: np.ndarray,
-    z2: np.ndarray,
-    a1: np.ndarray,
-    d2_sq: np.ndarray,
-    steps: np.ndarray,
-    noise_var: np.ndarray,
-    engaged: np.ndarray,
-    p: np.ndarray,
-    f: np.ndarray,
-    bvec: np.ndarray,
-    q: np.ndarray,
-    p0: np.ndarray,
-    c: np.ndarray,
+    memory: NavMemory,
+    model: NavModel,
     work: np.ndarray,
 ) -> None:
-    """`NavFilter.estimate` of row r: observed state obs (7,), known acceleration acc (3,);
-    writes the state to fly into out (7,) (a copy of obs unless the filter is engaged). work:
-    scratch (>= 18,)."""
+    """`NavFilter.estimate` of row r: observed state obs (7,), known acceleration acc (3,) m/s^2;
+    updates the row's `memory` and writes the state to fly into out (7,) (a copy of obs unless
+    the filter is engaged). work: scratch (>= 18,)."""
+    x, cov, z1, z2, a1 = memory.x, memory.cov, memory.z1, memory.z2, memory.a1
+    d2_sq, steps, noise_var, engaged = memory.d2_sq, memory.steps, memory.noise_var, memory.engaged
+    p, f, bvec, q, p0, c = model.params, model.f, model.bvec, model.q, model.p0, model.dynamics
     for k in range(7):
         out[k] = obs[k]
     if np.isnan(x[r, 0, 0]):  # first observation: the filter starts from it
@@ -124,31 +116,10 @@ def nav_estimate_rows(
     obs: np.ndarray,
     acc: np.ndarray,
     out: np.ndarray,
-    x: np.ndarray,
-    cov: np.ndarray,
-    z1: np.ndarray,
-    z2: np.ndarray,
-    a1: np.ndarray,
-    d2_sq: np.ndarray,
-    steps: np.ndarray,
-    noise_var: np.ndarray,
-    engaged: np.ndarray,
-    p: np.ndarray,
-    f: np.ndarray,
-    bvec: np.ndarray,
-    q: np.ndarray,
-    p0: np.ndarray,
-    c: np.ndarray,
+    memory: NavMemory,
+    model: NavModel,
 ) -> None:
     """`_nav_row` of each row (B,): observed (B, 7), accelerations (B, 3), into out (B, 7)."""
     work = np.empty(18)
     for b in range(len(rows)):
-        _nav_row(
-            rows[b], obs[b], acc[b], out[b], x, cov, z1, z2, a1, d2_sq, steps, noise_var,
-            engaged, p, f, bvec, q, p0, c, work,
-        )  # fmt: skip
-
-
-# ---- latency compensation ---------------------------------------------------------------------
-# latency parameters (float array): [max_delay_steps, thrust_model, forget, switch margin, jump m,
-# window_steps, window_forget]
+        _nav_row(rows[b], obs[b], acc[b], out[b], memory, model, work)

@@ -9,6 +9,7 @@ import numpy as np
 from pd_core import envelope
 from pd_core.runtime.decision import BRAKE, GUARD, HANDOVER, LIMITS, NETWORK
 from pd_core.runtime.kernels import njit
+from pd_core.runtime.kernels_state import RuleSettings
 
 # the sources `rules_rows` writes, as numbered in pd_core.runtime.decision
 if (NETWORK, BRAKE, GUARD, HANDOVER) != (0, 1, 2, 3):
@@ -19,11 +20,11 @@ if _LIMITS != tuple(range(len(LIMITS))):
 
 
 # ---- rules --------------------------------------------------------------------------------------
-# rule parameters (float array, `pd_core.runtime.rules.rule_settings`): [enabled, thrust_margin,
-# land_speed, touchdown_speed, measured_thrust, min_measured_thrust, guard_altitude, guard_climb,
-# handover_altitude, handover_mass, fallback brake_accel, fallback brake_margin, fallback
-# land_speed, fallback min_brake_accel, raised vertical thrust N, g (m/s^2, > 0), dt s,
-# brake_mass_loss]
+# rule parameters (`RuleSettings.params`, `pd_core.runtime.rules.rule_settings`): [enabled,
+# thrust_margin, land_speed, touchdown_speed, measured_thrust, min_measured_thrust,
+# guard_altitude, guard_climb, handover_altitude, handover_mass, fallback brake_accel, fallback
+# brake_margin, fallback land_speed, fallback min_brake_accel, raised vertical thrust N,
+# g (m/s^2, > 0), dt s, brake_mass_loss]
 _R_ON, _R_MARGIN, _R_LAND, _R_TOUCH, _R_MEAS, _R_MINMEAS, _R_GALT, _R_GCLIMB = range(8)
 _R_HALT, _R_HMASS, _R_FBRAKE, _R_FMARGIN, _R_FLAND, _R_FMINBRAKE, _R_RAISED, _R_G, _R_DT = range(
     8, 17
@@ -113,19 +114,19 @@ def rules_rows(
     states: np.ndarray,
     scale: np.ndarray,
     has_scale: bool,
-    level_table: np.ndarray,
-    table_n: np.ndarray,
-    n_per_axis: np.ndarray,
-    hi: np.ndarray,
-    rp: np.ndarray,
+    rules: RuleSettings,
     source: np.ndarray,
     frac: np.ndarray,
     limit: np.ndarray,
 ) -> None:
-    """`pd_core.runtime.rules.apply_rules` after the handover, in place: `actions` (B,) are the
-    proposed ones with the fallback's where `hand`; writes the actions flown into `actions`,
-    their source into `source` (B,), the delivered fraction counted on into `frac` (B,) and the
-    braking limit that fired (NO_LIMIT where none, or where the rules are off) into `limit`."""
+    """`pd_core.runtime.rules.apply_rules` after the handover, in place, under `rules`, on the
+    states (B, 7) counting on the vertical thrust scale (B,) where has_scale: `actions` (B,) are
+    the proposed ones (B,) with the fallback's where `hand` (B,); writes the actions flown into
+    `actions`, their source into `source` (B,), the delivered fraction counted on into `frac`
+    (B,) and the braking limit that fired (NO_LIMIT where none, or where the rules are off) into
+    `limit` (B,)."""
+    level_table, table_n, n_per_axis = rules.level_table, rules.table_n, rules.n_per_axis
+    hi, rp = rules.hi, rules.params
     top = n_per_axis[2] - 1
     for b in range(len(actions)):
         f = 1.0

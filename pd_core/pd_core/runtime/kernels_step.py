@@ -7,6 +7,13 @@ They call the kernels the stages' own modules call, in the same order (`states_v
 `predict_rows`, `thrust_scale_rows`; `handover_row`, `rules_rows`, the pipeline shift of
 `record_rows`), so a decision is the same to the bit; what they save is the Python between
 those kernels (a few dozen small numpy calls and argument conversions a step).
+
+Memory and settings arrive grouped as the named tuples of `pd_core.runtime.kernels_state`. The
+two kernels called on every decision (`before_actor`, `after_actor`) take each group as the named
+tuple or as a plain tuple of its fields in order, and name it again first thing (free in compiled
+code): numba fingerprints a named tuple's class and field names on every call (about 0.6 us a
+group, 3 us a decision), a plain tuple only its elements, so their callers hand them plain
+tuples built once (`LatencyCompensator.predict_scaled`, `pipeline`).
 """
 
 from __future__ import annotations
@@ -16,6 +23,14 @@ import numpy as np
 from pd_core.runtime.kernels import njit, states_valid
 from pd_core.runtime.kernels_latency import predict_rows, record_rows, thrust_scale_rows
 from pd_core.runtime.kernels_rules import handover_row, rules_rows
+from pd_core.runtime.kernels_state import (
+    LatencyMemory,
+    LatencySettings,
+    NavMemory,
+    NavModel,
+    Pipeline,
+    RuleSettings,
+)
 
 VALID, INVALID, JUMPED = 0, 1, 2
 """what `before_actor` returns"""
@@ -29,57 +44,26 @@ def before_actor(
     out: np.ndarray,
     jumped: np.ndarray,
     scale: np.ndarray,
-    want_scale: bool,
-    n_sd: float,
-    min_evidence: float,
-    noise2: float,
-    unmeasured: float,
-    measured_sd: float,
-    issued: np.ndarray,
-    last: np.ndarray,
-    score: np.ndarray,
-    delay: np.ndarray,
-    gain: np.ndarray,
-    cov: np.ndarray,
-    force_var: np.ndarray,
-    win: np.ndarray,
-    win_steps: np.ndarray,
-    win_sums: np.ndarray,
-    p: np.ndarray,
-    has_nav: bool,
-    nx: np.ndarray,
-    ncov: np.ndarray,
-    z1: np.ndarray,
-    z2: np.ndarray,
-    a1: np.ndarray,
-    d2_sq: np.ndarray,
-    nsteps: np.ndarray,
-    noise_var: np.ndarray,
-    engaged: np.ndarray,
-    nav_p: np.ndarray,
-    f: np.ndarray,
-    bvec: np.ndarray,
-    q: np.ndarray,
-    p0: np.ndarray,
-    c: np.ndarray,
+    memory: LatencyMemory,
+    settings: LatencySettings,
+    nav_memory: NavMemory,
+    nav_model: NavModel,
 ) -> int:
-    """`LatencyCompensator.predict_scaled` of rows (B,) observed in obs (B, 7): INVALID (nothing
-    done) unless every state passes `states_valid`; JUMPED as `predict_rows` returns False
-    (rows marked in jumped (B,), nothing else done); else VALID with the states to decide on in
-    out (B, 7) and the vertical thrust scale in scale (B,) (`thrust_scale_rows`, 1 unless
-    want_scale)."""
+    """`LatencyCompensator.predict_scaled` of rows (B,) observed in obs (B, 7), on the
+    compensator's memory and settings and its navigation filter's (each the named tuple or a
+    plain tuple of its fields, module docstring): INVALID (nothing done) unless every state
+    passes `states_valid` (limits: `pd_core.state.STATE_LIMITS`); JUMPED as `predict_rows`
+    returns False (rows marked in jumped (B,), nothing else done); else VALID with the states
+    to decide on in out (B, 7) and the vertical thrust scale in scale (B,) (`thrust_scale_rows`
+    at `settings.shortfall_sd`, 1 unless `settings.measures_thrust`)."""
+    memory, settings = LatencyMemory(*memory), LatencySettings(*settings)
+    nav_memory, nav_model = NavMemory(*nav_memory), NavModel(*nav_model)
     if not states_valid(obs, limits):
         return INVALID
-    if not predict_rows(
-        rows, obs, out, jumped, issued, last, score, delay, gain, cov, force_var, win, win_steps,
-        win_sums, p, has_nav, nx, ncov, z1, z2, a1, d2_sq, nsteps, noise_var, engaged, nav_p, f,
-        bvec, q, p0, c,
-    ):  # fmt: skip
+    if not predict_rows(rows, obs, out, jumped, memory, settings, nav_memory, nav_model):
         return JUMPED
-    if want_scale:
-        scale[:] = thrust_scale_rows(
-            rows, delay, gain, cov, win_sums, n_sd, min_evidence, noise2, unmeasured, measured_sd
-        )
+    if settings.measures_thrust:
+        scale[:] = thrust_scale_rows(rows, memory, settings, settings.shortfall_sd)
     else:
         scale[:] = 1.0
     return VALID
@@ -90,35 +74,34 @@ def after_actor(
     proposed: np.ndarray,
     states: np.ndarray,
     scale: np.ndarray,
-    has_scale: bool,
+    rows: np.ndarray,
+    rules: RuleSettings,
+    pipeline: Pipeline,
     handed_over: bool,
     actions: np.ndarray,
     hand: np.ndarray,
     source: np.ndarray,
     frac: np.ndarray,
     limit: np.ndarray,
-    level_table: np.ndarray,
-    table_n: np.ndarray,
-    n_per_axis: np.ndarray,
-    hi: np.ndarray,
-    rp: np.ndarray,
-    has_memory: bool,
-    rows: np.ndarray,
-    issued: np.ndarray,
-    delay_memory: np.ndarray,
-    engaged_memory: np.ndarray,
-    has_nav: bool,
     delay: np.ndarray,
     nav: np.ndarray,
 ) -> bool:
-    """`pd_core.runtime.rules.decide` and `LatencyCompensator.record` of the actions proposed
-    (B,) on the states decided on (B, 7) of rows (B,).
+    """`pd_core.runtime.rules.decide` under `rules` and `LatencyCompensator.record` into
+    `pipeline` (each the named tuple or a plain tuple of its fields, module docstring) of the
+    actions proposed (B,) on the states decided on (B, 7) of rows (B,), counting on the
+    vertical thrust scale (B,) where `pipeline.recorded`.
 
     Unless handed_over: actions = proposed and hand (B,) = `handover_row` (rules on); if any
     row is handed over, returns False there (the caller puts the fallback's actions into
     `actions` where `hand` and calls again with handed_over). Then `rules_rows` (actions,
-    source, frac, limit in place) and, with memory, the commands flown enter the pipeline (`issued`)
-    and each row's identified delay and navigation-filter state go to delay, nav (B,)."""
+    source, frac, limit (B,) in place) and, with memory, the commands flown enter the pipeline
+    (`pipeline.issued`) and each row's identified delay and navigation-filter state go to
+    delay, nav (B,) (0 and False without)."""
+    rules, pipeline = RuleSettings(*rules), Pipeline(*pipeline)
+    table_n, hi, rp = rules.table_n, rules.hi, rules.params
+    has_scale = has_memory = pipeline.recorded
+    issued, delay_memory, engaged_memory = pipeline.issued, pipeline.delay, pipeline.engaged
+    has_nav = pipeline.nav
     n = len(proposed)
     if not handed_over:
         any_hand = False
@@ -128,10 +111,7 @@ def after_actor(
             any_hand = any_hand or hand[b]
         if any_hand:
             return False
-    rules_rows(
-        actions, proposed, hand, states, scale, has_scale, level_table, table_n, n_per_axis, hi,
-        rp, source, frac, limit,
-    )  # fmt: skip
+    rules_rows(actions, proposed, hand, states, scale, has_scale, rules, source, frac, limit)
     if has_memory:
         thrust = np.empty((n, 3))
         for b in range(n):

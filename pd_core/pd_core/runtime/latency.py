@@ -22,7 +22,8 @@ deviation below `measured_gain_sd`), the rules may count on no more than `unmeas
 Where the navigation is noisy the prediction starts from the navigation filter's estimate
 (`pd_core.runtime.navfilter`, fed with the command this lag and matrix say the plant flew).
 Settings: `pd_core.runtime.config.LatencyConfig`; one lander per row (`RowMemory`). The arithmetic,
-row by row, is compiled: `pd_core.runtime.kernels` (`predict_rows`, `_observe_row`).
+row by row, is compiled: `pd_core.runtime.kernels_latency` (`predict_rows`, `_observe_row`, on a
+`LatencyMemory` and `LatencySettings`).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pd_core.runtime.kernels_latency import (
     thrust_scale_rows,
     window_bounds,
 )
+from pd_core.runtime.kernels_state import LatencyMemory, LatencySettings, NavMemory, Pipeline
 from pd_core.runtime.kernels_step import INVALID, JUMPED, before_actor
 from pd_core.runtime.navfilter import NavFilter
 from pd_core.runtime.rowmemory import RowMemory
@@ -44,9 +46,6 @@ from pd_core.state import STATE_LIMITS, as_state_rows, check_state
 
 _CONSTS = consts()
 _IDENTITY = np.eye(3)[None, None]
-_NONE_ENGAGED = np.zeros(0, dtype=bool)
-NO_PIPELINE = (np.zeros((0, 1, 3)), np.zeros(0, dtype=np.int64), _NONE_ENGAGED, False)
-"""`LatencyCompensator.pipeline` where there is no memory (`kernels_step.after_actor` reads none)"""
 
 
 def lag_residuals(
@@ -94,11 +93,6 @@ def _window_settings(cfg: LatencyConfig) -> tuple[float, float]:
     return float(cfg.window_min_evidence), 2.0 * cfg.window_noise_mps**2
 
 
-def _unmeasured_settings(cfg: LatencyConfig) -> tuple[float, float]:
-    """(unmeasured thrust fraction, measured gain sd), as `thrust_scale_rows` takes them."""
-    return float(cfg.unmeasured_thrust), float(cfg.measured_gain_sd)
-
-
 class LatencyCompensator(RowMemory):
     """Per-row memory of the commands issued and the lag scores; see the module docstring."""
 
@@ -112,19 +106,29 @@ class LatencyCompensator(RowMemory):
         self.nav = NavFilter(nav, n_rows) if nav.enabled else None
         """the navigation filter the prediction starts from (None: the observed state)"""
         self._cov0 = np.eye(3) * cfg.thrust_matrix_prior_sd**2
-        self._params = np.array(
+        params = np.array(
             [
                 cfg.max_delay_steps, cfg.thrust_model, cfg.forget_per_step,
                 cfg.switch_margin_mps2, cfg.jump_m, cfg.window_steps, cfg.window_forget,
             ],
             dtype=float,
         )  # fmt: skip
-        """the kernels' settings (`pd_core.runtime.kernels`, latency parameters)"""
-        self._window = _window_settings(cfg)
-        self._unmeasured = _unmeasured_settings(cfg)
-        nav_off = NavFilter(nav, 0)
-        self._no_nav = nav_off.state()
-        """the navigation memory the kernels are given where there is no filter (no rows)"""
+        min_evidence, noise2 = _window_settings(cfg)
+        self.settings = LatencySettings(
+            params=params,
+            nav=self.nav is not None,
+            measures_thrust=bool(cfg.max_delay_steps > 0 and cfg.thrust_model),
+            shortfall_sd=float(cfg.shortfall_sd),
+            window_min_evidence=min_evidence,
+            window_noise2=noise2,
+            unmeasured_thrust=float(cfg.unmeasured_thrust),
+            measured_gain_sd=float(cfg.measured_gain_sd),
+            dynamics=_CONSTS,
+        )
+        """the settings the kernels take (`LatencySettings`)"""
+        self._nav_kernels = NavFilter(nav, 0) if self.nav is None else self.nav
+        """the filter whose memory and model the kernels are given (one of no rows where there
+        is no filter)"""
         self.reset(n_rows)
 
     def reset(self, n_rows: int) -> None:
@@ -132,7 +136,8 @@ class LatencyCompensator(RowMemory):
         super().reset(n_rows)
         if self.nav is not None:
             self.nav.reset(n_rows)
-        self._memory: tuple | None = None
+        self._memory: tuple[LatencyMemory, NavMemory] | None = None
+        self._plain: tuple[tuple[tuple, ...], tuple] | None = None
 
     def _fresh(self, n_rows: int) -> dict[str, np.ndarray]:
         """The memory of n_rows landers that have flown nothing yet."""
@@ -162,18 +167,35 @@ class LatencyCompensator(RowMemory):
         if self.nav is not None:
             self.nav.grow(n_rows)
         self._memory = None
+        self._plain = None
 
-    def _kernel_memory(self) -> tuple:
-        """The memory and settings `predict_rows` takes after its first four arguments, in its
-        order (kept until `reset` or `grow` replace the arrays; `clear` writes into them)."""
+    def _kernel_memory(self) -> tuple[LatencyMemory, NavMemory]:
+        """The memory the kernels take: this compensator's and its navigation filter's (the
+        arrays themselves; built again only after `reset` or `grow` replace them, `clear`
+        writes into them)."""
         if self._memory is None:
-            nav = self._no_nav if self.nav is None else self.nav.state()
-            self._memory = (
-                self._issued, self._last, self._score, self.delay_steps, self.gain, self._cov,
-                self.force_noise_var, self._win, self._win_steps, self._win_sums, self._params,
-                self.nav is not None, *nav,
+            memory = LatencyMemory(
+                issued=self._issued, last=self._last, score=self._score, delay=self.delay_steps,
+                gain=self.gain, cov=self._cov, force_var=self.force_noise_var, win=self._win,
+                win_steps=self._win_steps, win_sums=self._win_sums,
             )  # fmt: skip
+            self._memory = (memory, self._nav_kernels.memory())
         return self._memory
+
+    def _plain_groups(self) -> tuple[tuple[tuple, ...], tuple]:
+        """(`before_actor`'s memory, settings, navigation memory and model; `after_actor`'s
+        `Pipeline`), each a plain tuple of its named tuple's fields: what the two kernels of
+        every decision are handed (`pd_core.runtime.kernels_step`: cheaper to dispatch than the
+        named tuples). Kept as `_kernel_memory`."""
+        if self._plain is None:
+            memory, nav = self._kernel_memory()
+            pipeline = Pipeline(
+                recorded=True, issued=self._issued, delay=self.delay_steps, engaged=nav.engaged,
+                nav=self.settings.nav,
+            )  # fmt: skip
+            groups = (memory, self.settings, nav, self._nav_kernels.model)
+            self._plain = (tuple(tuple(g) for g in groups), tuple(pipeline))
+        return self._plain
 
     def clear(self, rows: np.ndarray) -> None:
         super().clear(rows)
@@ -204,24 +226,20 @@ class LatencyCompensator(RowMemory):
         out = np.empty_like(obs)
         scale = np.empty(len(rows))
         jumped = np.empty(len(rows), dtype=bool)
-        want_scale = self.max_delay_steps > 0 and self.thrust_model  # (as vertical_thrust_scale)
+        groups = self._plain_groups()[0]
         while True:
-            code = before_actor(
-                obs, STATE_LIMITS, rows, out, jumped, scale, want_scale, self.cfg.shortfall_sd,
-                *self._window, *self._unmeasured, *self._kernel_memory(),
-            )  # fmt: skip
+            code = before_actor(obs, STATE_LIMITS, rows, out, jumped, scale, *groups)
             if code == INVALID:
                 check_state(observed)
             if code != JUMPED:
                 return out, scale
             self.clear(rows[jumped])
 
-    def pipeline(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-        """(issued commands (rows, lags, 3), the lag each row flies (rows,), the navigation
-        filter engaged (rows,), whether there is a filter): the arrays
-        `kernels_step.after_actor` records into and reads (the memory, not copies)."""
-        engaged = _NONE_ENGAGED if self.nav is None else self.nav.engaged
-        return self._issued, self.delay_steps, engaged, self.nav is not None
+    def pipeline(self) -> tuple:
+        """The `Pipeline` fields as a plain tuple (as `kernels_step.after_actor` is handed
+        them): the issued commands, the lag each row flies and the navigation filter engaged,
+        the arrays `after_actor` records into and reads (the memory, not copies)."""
+        return self._plain_groups()[1]
 
     def vertical_thrust_scale(self, rows: np.ndarray, n_sd: float | None = None) -> np.ndarray:
         """(B,) delivered over commanded vertical thrust of rows (B,) as far as the evidence
@@ -235,10 +253,7 @@ class LatencyCompensator(RowMemory):
         if self.max_delay_steps == 0 or not self.thrust_model:
             return np.ones(len(rows))
         n_sd = self.cfg.shortfall_sd if n_sd is None else n_sd
-        return thrust_scale_rows(
-            rows, self.delay_steps, self.gain, self._cov, self._win_sums, float(n_sd),
-            *self._window, *self._unmeasured,
-        )  # fmt: skip
+        return thrust_scale_rows(rows, self._kernel_memory()[0], self.settings, float(n_sd))
 
     def _vertical_gain(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(lag, identified vertical gain, its standard deviation), each (B,), of rows (B,)."""

@@ -31,10 +31,11 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
 from pd_core.runtime.config import LatencyConfig, NavFilterConfig, RulesConfig, RuntimeConfig
 from pd_core.runtime.decision import SOURCES, Decision, Decisions, changed_count, describe_counts
+from pd_core.runtime.kernels_state import NO_PIPELINE, RuleSettings
 from pd_core.runtime.kernels_step import after_actor
-from pd_core.runtime.latency import NO_PIPELINE, LatencyCompensator
+from pd_core.runtime.latency import LatencyCompensator
 from pd_core.runtime.network import NumpyQNetwork, observed_states
-from pd_core.runtime.rules import RuleSettings, rule_settings
+from pd_core.runtime.rules import rule_settings
 from pd_core.teachers.zemzev import ZemZevController
 
 _ROW0 = np.zeros(1, dtype=np.int64)
@@ -82,15 +83,11 @@ def rules_and_record(
     limit = np.empty(n, dtype=np.uint8)
     delay = np.empty(n, dtype=np.int64)
     nav = np.empty(n, dtype=bool)
-    has_memory = memory is not None
-    pipeline = memory.pipeline() if has_memory else NO_PIPELINE
-    s = settings
-    rules = (s.level_table, s.table_n, s.n_per_axis, s.hi, s.params)
-    tail = (*rules, has_memory, rows, *pipeline, delay, nav)
-    head = (proposed, decided, scale, has_memory)
-    if not after_actor(*head, False, actions, hand, source, frac, limit, *tail):
+    pipeline = NO_PIPELINE if memory is None else memory.pipeline()
+    head = (proposed, decided, scale, rows, tuple(settings), pipeline)  # plain: kernels_step
+    if not after_actor(*head, False, actions, hand, source, frac, limit, delay, nav):
         actions[hand] = fallback.act_batch(decided[hand])
-        after_actor(*head, True, actions, hand, source, frac, limit, *tail)
+        after_actor(*head, True, actions, hand, source, frac, limit, delay, nav)
     return actions, Decisions(actions, proposed, source, delay, frac, nav, limit)
 
 

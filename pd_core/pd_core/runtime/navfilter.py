@@ -12,7 +12,8 @@ Each axis carries a Kalman filter on [position, velocity, unmodelled acceleratio
 The estimate replaces the observation only where the estimated noise exceeds a floor, after
 `warm_steps` of evidence: without navigation noise the guidance flies the observed state to the
 bit. The mass passes through as observed. Settings: `pd_core.runtime.config.NavFilterConfig`.
-The arithmetic, row by row, is compiled: `pd_core.runtime.kernels` (`_nav_row`).
+The arithmetic, row by row, is compiled: `pd_core.runtime.kernels_nav` (`_nav_row`, on a
+`NavMemory` and a `NavModel`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pd_core.config import DT_S
 from pd_core.runtime.config import NavFilterConfig
 from pd_core.runtime.kernels import consts
 from pd_core.runtime.kernels_nav import nav_estimate_rows
+from pd_core.runtime.kernels_state import NavMemory, NavModel
 from pd_core.runtime.rowmemory import RowMemory
 
 
@@ -45,11 +47,13 @@ class NavFilter(RowMemory):
         self._p0 = np.diag(np.square([cfg.initial_sd_m, cfg.initial_sd_mps, cfg.initial_sd_mps2]))
         self._floor = np.array([cfg.position_floor_m**2, cfg.velocity_floor_mps**2])
         self._prior = np.square([cfg.prior_noise_m, cfg.prior_noise_mps])
-        self._params = np.array(
+        params = np.array(
             [cfg.warm_steps, cfg.forget_per_step, *self._floor, *self._prior], dtype=float
         )
-        """the kernels' settings: [warm_steps, forget, floors (2), priors (2)]"""
-        self._consts = consts()
+        self.model = NavModel(
+            params=params, f=self._f, bvec=self._b, q=self._q, p0=self._p0, dynamics=consts()
+        )
+        """the settings the kernels take (`NavModel`)"""
         self.reset(n_rows)
 
     def _fresh(self, n_rows: int) -> dict[str, np.ndarray]:
@@ -71,12 +75,12 @@ class NavFilter(RowMemory):
         """(B,) observations of rows (B,) the noise estimate has learnt from."""
         return self._steps[np.asarray(rows, dtype=np.int64)]
 
-    def state(self) -> tuple[np.ndarray, ...]:
-        """The memory and settings `pd_core.runtime.kernels_nav._nav_row` takes, in its order."""
-        return (
-            self._x, self._cov, self._z1, self._z2, self._a1, self._d2_sq, self._steps,
-            self.noise_var, self.engaged, self._params, self._f, self._b, self._q, self._p0,
-            self._consts,
+    def memory(self) -> NavMemory:
+        """The memory the kernels take (`NavMemory`): the arrays themselves, until `reset` or
+        `grow` replace them."""
+        return NavMemory(
+            x=self._x, cov=self._cov, z1=self._z1, z2=self._z2, a1=self._a1, d2_sq=self._d2_sq,
+            steps=self._steps, noise_var=self.noise_var, engaged=self.engaged,
         )  # fmt: skip
 
     def estimate(
@@ -98,5 +102,5 @@ class NavFilter(RowMemory):
         acc = np.ascontiguousarray(accel_mps2, dtype=float).reshape(-1, 3)
         self.grow(int(rows.max()) + 1 if len(rows) else 0)
         out = np.empty_like(obs)
-        nav_estimate_rows(rows, obs, acc, out, *self.state())
+        nav_estimate_rows(rows, obs, acc, out, self.memory(), self.model)
         return out

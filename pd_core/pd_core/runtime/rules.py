@@ -31,31 +31,14 @@ here take arrays of landers.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, GRAVITY_MPS2
 from pd_core.runtime import kernels_rules as kernels
 from pd_core.runtime.config import RulesConfig
+from pd_core.runtime.kernels_state import RuleSettings
 from pd_core.teachers.zemzev import ZemZevController, ZemZevParams
-
-
-class RuleSettings(NamedTuple):
-    """A `RulesConfig`, an action space and a fallback as the kernels take them (built once by
-    `rule_settings`)."""
-
-    params: np.ndarray
-    """(18,) floats: see `pd_core.runtime.kernels_rules`, rule parameters"""
-    level_table: np.ndarray
-    """(n, 3) int64 levels of each action"""
-    table_n: np.ndarray
-    """(n, 3) thrust of each action, N"""
-    n_per_axis: np.ndarray
-    """(3,) int64"""
-    hi: np.ndarray
-    """(3,) the largest thrust on each axis, N"""
 
 
 def rule_settings(
@@ -174,9 +157,8 @@ def decide(
     has_scale = vertical_thrust_scale is not None
     scale = np.ascontiguousarray(vertical_thrust_scale, dtype=float) if has_scale else frac
     kernels.rules_rows(
-        a, np.asarray(proposed, dtype=np.int64).reshape(-1), hand, s, scale, has_scale,
-        settings.level_table, settings.table_n, settings.n_per_axis, settings.hi, rp, source,
-        frac, limit,
+        a, np.asarray(proposed, dtype=np.int64).reshape(-1), hand, s, scale, has_scale, settings,
+        source, frac, limit,
     )  # fmt: skip
     return a, source, frac, limit
 
