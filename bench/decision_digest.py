@@ -4,7 +4,7 @@ layer leave what shipped files fly unchanged, to the bit?
     python bench/decision_digest.py [--episodes 64] [--seed 4400000] [--dispersions broad]
         [SPEC ...]
 
-Flies each agent (a `pd-eval` spec: a policy file, `shield:controller:NAME`, `set:K=V:SPEC`;
+Flies each agent (a `pd-eval` spec: a policy file, `layer:controller:NAME`, `set:K=V:SPEC`;
 default: every policy file in models/, each behind its own pinned runtime layer) on
 `--episodes` episodes of each scenario (episode i on env seed seed + i, `Runtime.step_rows` on
 all landers still flying, as `pd_core.episodes.rollout` does) and prints the

@@ -6,10 +6,10 @@
 Part 1: the fuel-optimal landing (`pd_core.ocp.solve(objective="fuel")`, RL thrust limits) from the
 first `--episodes` nominal Table 3 initial states of seed `--seed`, with the vertical thrust capped
 at each `--fractions` of its 13 kN. A guidance law that keeps a reserve of (1 - f) of the vertical
-thrust for thrust shortfalls, gusts and misalignment (the braking shield counts on f = 0.9) cannot
+thrust for thrust shortfalls, gusts and misalignment (the runtime layer counts on f = 0.9) cannot
 land for less than the f row: its ratio to the full-thrust optimum is the floor for such a law.
 
-Part 2: each agent (`pd-eval` specs: a policy file, `controller:NAME`, `shield:controller:NAME`)
+Part 2: each agent (`pd-eval` specs: a policy file, `controller:NAME`, `layer:controller:NAME`)
 flies the same episodes (disturbances on). Printed per agent: median fuel / fuel-optimal, flight
 time, and the time and fuel spent in each altitude band (above 500 m, 500-20 m, below 20 m)
 beside the optimum's, and the fuel burnt by the lateral (i, j) and the vertical (k) thrusters
@@ -69,7 +69,7 @@ def main() -> None:
     ap.add_argument(
         "--agents",
         nargs="+",
-        default=[str(SHIPPED_POLICY), "controller:zemzev", "shield:controller:zemzev"],
+        default=[str(SHIPPED_POLICY), "controller:zemzev", "layer:controller:zemzev"],
         help="pd-eval agent specs flown in part 2",
     )
     a = ap.parse_args()

@@ -5,7 +5,7 @@
 Issue 10 asks for nominal fuel <= 1.05x the fuel-optimal landing; the student copies its
 teacher's braking profile, so a leaner student needs a leaner teacher. Each variant below is the
 `zemzev-vernier` teacher with its braking margin, braking cap, final approach or lateral t_go
-changed, behind the shield with the same margin (`shield:controller:...`, with the latency
+changed, behind the layer with the same margin (`layer:controller:...`, with the latency
 compensation, the navigation filter and the measured thrust). (The two rows that sized the
 reserve from the layer's measurements, `pd_core.reserve`, left with that unshipped study; their
 figures are in docs/experiments/.) Printed per variant: the
@@ -49,7 +49,7 @@ CAMPAIGNS = (  # (label, campaign, seed): the seeds of the README tables
 )
 LEAN = {"brake_accel_mps2": math.inf, "brake_margin": 0.95}  # brake on 95 % of the capability
 LEAN98 = {"brake_accel_mps2": math.inf, "brake_margin": 0.98, "final_slope_per_s": 0.6}
-FIXED = {  # name: (teacher changes, shield changes)
+FIXED = {  # name: (teacher changes, layer rule changes)
     "baseline (zemzev-vernier)": ({}, {}),
     "brake on 95 %": (LEAN, {"thrust_margin": 0.95}),
     "95 %, final slope 0.6/s": ({**LEAN, "final_slope_per_s": 0.6}, {"thrust_margin": 0.95}),
@@ -60,10 +60,10 @@ FIXED = {  # name: (teacher changes, shield changes)
 }
 
 
-def actor(teacher: dict, shield: dict) -> Runtime:
+def actor(teacher: dict, rules: dict) -> Runtime:
     return Runtime(
         ZemZevController(replace(VERNIER_PARAMS, **teacher)),
-        RuntimeConfig(rules=RulesConfig(**shield)),
+        RuntimeConfig(rules=RulesConfig(**rules)),
     )
 
 
@@ -86,7 +86,7 @@ def main() -> None:
     print(
         f"fuel-optimal landings of {args.states} nominal states: median {np.median(optimum):.1f} kg"
     )
-    head = f"{'teacher + shield':<34}{'fuel ratio':>11}" + "".join(
+    head = f"{'teacher + layer':<34}{'fuel ratio':>11}" + "".join(
         f"{c:>12}" for c, _, _ in CAMPAIGNS
     )
     print(head + "\n" + "-" * len(head))

@@ -2,7 +2,7 @@
 
     python bench/miss_profile.py [--episodes 300] [--seed 0] [--agents SPEC ...]
 
-Each agent (`pd-eval` specs: a policy file, `controller:NAME`, `shield:controller:NAME`) flies
+Each agent (`pd-eval` specs: a policy file, `controller:NAME`, `layer:controller:NAME`) flies
 the same nominal episodes. Printed per agent, side by side: the median lateral distance to the
 pad and lateral speed as each flight first passes below each altitude gate, and the touchdown
 miss. Then, for each agent that is not the teacher, how often its lateral (i, j) levels equal
@@ -25,7 +25,7 @@ from pd_core.runtime.build import build  # noqa: E402
 
 GATES_M = (100.0, 20.0, 10.0, 5.0, 2.0, 1.0)
 BANDS_M = ((0.0, 2.0), (2.0, 5.0), (5.0, 20.0), (20.0, 100.0), (100.0, 1e4))
-TEACHER = "shield:controller:zemzev-vernier"
+TEACHER = "layer:controller:zemzev-vernier"
 
 
 def at_gates(ro: Rollouts) -> np.ndarray:

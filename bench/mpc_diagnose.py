@@ -4,7 +4,7 @@
 
 Flies `--episodes` nominal Table 3 episodes (disturbances on, episode i on seed `--seed` + i,
 the episodes `pd-eval --fuel-optimal` uses) with the controller behind the runtime layer
-(`Runtime(make_controller(NAME), RuntimeConfig())`, as `shield:controller:NAME`; `--bare`: no
+(`Runtime(make_controller(NAME), RuntimeConfig())`, as `layer:controller:NAME`; `--bare`: no
 layer), one episode at a time, and prints per episode and as medians:
 
 * fuel / the unreserved fuel-optimal landing from the same state (`ocp.solve`, RL limits);

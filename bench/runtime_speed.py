@@ -97,8 +97,8 @@ def main() -> None:
     print(implementation(rt, load_s) + "\n")
     path = rollout(rt, 1, 0, keep_trajectories=1).trajectories[0][:-1]  # one nominal flight
     repeats = max(1, args.decisions // (len(path) * args.rounds))
-    zz = build("controller:zemzev-vernier", layer=True).runtime
-    teacher = build("shield:controller:mpc-fuel-reserve").runtime
+    zz = build("controller:zemzev-vernier", as_runtime=True).runtime
+    teacher = build("layer:controller:mpc-fuel-reserve").runtime
 
     def layer_step(s: np.ndarray) -> None:
         rt.step(s)

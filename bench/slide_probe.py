@@ -49,7 +49,7 @@ def x_levels(spec: str, states: np.ndarray) -> np.ndarray:
     """The agent's horizontal (x) thrust level on each state."""
     # the network or controller alone, each state on its own (a fresh MPC teacher plans each
     # from scratch: `propose` on no plans)
-    actions = build(spec, layer=True).runtime.actor.propose(states)
+    actions = build(spec, as_runtime=True).runtime.actor.propose(states)
     return DEFAULT_ACTIONS.level_table[np.asarray(actions, dtype=np.int64)][:, 0]
 
 

@@ -3,7 +3,7 @@
     python bench/teacher_handover.py [--episodes 50] [--seed 0] [--dispersions ""] SPEC ...
 
 Each SPEC is a `pd-eval` spec of an MPC controller behind a layer
-(`shield:controller:NAME`, `set:K=V:shield:controller:NAME`). Prints, per spec, the share of
+(`layer:controller:NAME`, `set:K=V:layer:controller:NAME`). Prints, per spec, the share of
 the teacher's steps flown by its fallback (the hand-over near the pad, and every step after a
 failed re-plan), the warm re-plans that needed the full thrust limits, the layer's changes and
 the success rate (issue 68: "it does not hand over to ZEM/ZEV where it does not need to").

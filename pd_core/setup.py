@@ -26,6 +26,7 @@ setup(
         "console_scripts": [
             "pd-ocp = pd_core.cli.ocp:main",
             "pd-train = pd_core.cli.train:main",
+            "pd-demos = pd_core.cli.demos:main",
             "pd-eval = pd_core.cli.evaluate:main",
             "pd-sweep = pd_core.cli.sweep:main",
         ],

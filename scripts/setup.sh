@@ -140,7 +140,7 @@ EOF
 
     log "pip install -e pd_core"
     quiet_pip install -q --no-deps --no-build-isolation -e pd_core
-    for script in pd-ocp pd-train pd-eval; do
+    for script in pd-ocp pd-train pd-demos pd-eval; do
         [[ -x $VENV/bin/$script ]] || {
             echo "setup.sh: $VENV/bin/$script missing after pip install -e pd_core" >&2
             exit 1

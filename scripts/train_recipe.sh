@@ -40,7 +40,7 @@
 # --teacher zemzev-vernier: the older 60 min recipe of the ZEM/ZEV lineage (models/pd_dqn_robust.md
 # has the file that lineage shipped after ten hand-run rounds), three pd-train stages:
 #   1. `best` preset from scratch (20 min);
-#   2. fine-tune under `broad` from the zemzev-vernier teacher, behind the braking shield, with
+#   2. fine-tune under `broad` from the zemzev-vernier teacher, behind the runtime layer, with
 #      the landing bonus and the near-pad inputs (25 min, demonstrations included);
 #   3. the same again from stage 2's best.pt (13.5 min). Its policy is stage 3's final.pt.
 #
@@ -137,7 +137,7 @@ else
 fi
 
 FINE_TUNE=(--preset robust --controller zemzev-vernier --precision-bonus 10
-    --recovery-failed-share 0.5 --shield --dispersions broad "${near_pad[@]}")
+    --recovery-failed-share 0.5 --layer --dispersions broad "${near_pad[@]}")
 start=$SECONDS
 
 stage() {  # stage NAME ARGS...: run pd-train unless NAME already finished

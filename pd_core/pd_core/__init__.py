@@ -8,11 +8,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from pd_core.deprecation import renamed_argument
+
 __version__ = "0.3.0"
 
 
-def load_policy(path: Any, shield: str = "file") -> Any:
-    """The runtime that flies a policy file; see `pd_core.runtime.policy_file.load_policy`."""
+def load_policy(path: Any, layer: str = "file", *, shield: str | None = None) -> Any:
+    """The runtime that flies a policy file; see `pd_core.runtime.policy_file.load_policy`
+    (`shield`: the old name of `layer`, deprecated: it warns)."""
     from pd_core.runtime.policy_file import load_policy as _load
 
-    return _load(path, shield=shield)
+    return _load(path, renamed_argument("load_policy", "shield", shield, "layer", layer, "file"))

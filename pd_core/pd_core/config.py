@@ -140,17 +140,17 @@ NEAR_PAD_SCALE = np.array([2.0, 2.0, 10.0, 0.5, 0.5, 2.0])
 # weakest engine promised (80 %); pd_core.state.thrust_input
 THRUST_INPUT_SPAN = 0.2
 
-# --- Braking (ours: the ZEM/ZEV teacher's profile and the braking shield) ---------------------
+# --- Braking (ours: the ZEM/ZEV teacher's profile and the runtime layer's braking limit) ------
 
 BRAKE_MARGIN = 0.9  # fraction of the vertical braking authority counted on (thrust error, gusts)
 LAND_SPEED_MPS = 0.5  # descent speed aimed at on the pad (Eq. 12 allows 2 m/s; see controllers)
-# ours: the braking shield lets a lander touch down this fast (half of Eq. 12's 2 m/s)
+# ours: the runtime layer lets a lander touch down this fast (half of Eq. 12's 2 m/s)
 TOUCHDOWN_SPEED_MPS = 1.0
 GUARD_ALTITUDE_M = 10.0  # ours: no free fall below this while descending (pd_core.runtime.rules)
 # ours: where the guard's raised level would climb faster than this, it lets a lander descending
 # slower than the land speed fall freely (pd_core.runtime.rules: the hover trap of light landers)
 GUARD_CLIMB_MPS2 = 1.0
-HANDOVER_ALTITUDE_M = 5.0  # ours: above this the shield hands lateral-limited states to the teacher
+HANDOVER_ALTITUDE_M = 5.0  # ours: above this the layer hands lateral-limited states to the teacher
 # ours: below this (observed) mass the teacher flies: lighter than the student was trained to land
 # (its lightest training starts, 1600 kg, touch down at about 1300-1350 kg; pd_core.runtime.rules)
 HANDOVER_MASS_KG = 1350.0

@@ -29,7 +29,9 @@ warm-up) and makes its topics; activate starts answering; inactive, states are c
 answered; cleanup releases the policy with its decision-time summary. `autostart` (default
 true) configures and activates it at start-up, where a bad model file stops it in one line.
 
-Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml.
+Parameters are read at start-up; defaults in pd_bringup/config/policy.yaml. 'shield' and
+'shield_settings', the old names of 'layer' and 'layer_settings', still work for one release:
+set, they warn and are flown; set beside a new name that disagrees, configure refuses them.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from pd_core.config import TABLE3
 from pd_core.runtime.build import CONTROLLER, MODEL_ENV, ROOT_ENV, Built, build
 from pd_core.runtime.layer import Runtime
-from pd_core.runtime.policy_file import SHIELD_MODES, SHIPPED_POLICY, PolicyLoadError
+from pd_core.runtime.policy_file import LAYER_MODES, SHIPPED_POLICY, PolicyLoadError
 from pd_core.state import check_state
 from pd_core.teachers.registry import CONTROLLERS
 from pd_interfaces.msg import GuidanceStatus, LanderState, ThrustCommand
@@ -71,7 +73,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         f"the shipped model: ${MODEL_ENV} if set, else ${ROOT_ENV}/{SHIPPED_POLICY} ({ROOT_ENV} is "
         f"set by env.sh), else {SHIPPED_POLICY} in the source tree the package runs from.",
     ),
-    "shield": (
+    "layer": (
         "file",
         "Runtime layer (pd_core.runtime: prediction through the actuation delay identified in "
         "flight, navigation filter, handover to ZEM/ZEV-vernier outside the trained envelope, "
@@ -79,13 +81,16 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         "code's default config (also around a reference controller), or 'never' (the bare "
         "network; YAML reads on/off as booleans).",
     ),
-    "shield_settings": (
+    "layer_settings": (
         "",
-        "Runtime-layer settings changed from what 'shield' gives, as K=V,K=V (fields of "
+        "Runtime-layer settings changed from what 'layer' gives, as K=V,K=V (fields of "
         "pd_core.runtime.config.RuntimeConfig, e.g. 'nav_filter.enabled=0,touchdown_speed_mps=0' "
         "for an ablation in the closed loop; pd-eval's set:K=V,...:SPEC does the same offline). "
         "Refused at start-up in one line where a setting is bad. Empty = none.",
     ),
+    # the old names, for one release: a value other than the default is flown, with a warning
+    "shield": ("file", "Deprecated: the old name of 'layer' (it warns)."),
+    "shield_settings": ("", "Deprecated: the old name of 'layer_settings' (it warns)."),
     "stats_period_s": (
         10.0,
         "Log decision-time statistics (p50/p99/max of the state->command callback) every this "
@@ -95,12 +100,14 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 CHECKS: dict[str, params.Check] = {
     "stats_period_s": params.at_least(0.0),
-    "shield": params.one_of(SHIELD_MODES),
+    "layer": params.one_of(LAYER_MODES),
+    "shield": params.one_of(LAYER_MODES),
 }
+RENAMED = {"shield": "layer", "shield_settings": "layer_settings"}  # deprecated -> new name
 LOG_FIRST = 20  # per kind of problem, log this many one by one, then every 100th
 
 
-def build_policy(name: str, model_path: str, shield: str = "file", settings: str = "") -> Built:
+def build_policy(name: str, model_path: str, layer: str = "file", settings: str = "") -> Built:
     """What flies for the node's parameters (`pd_core.runtime.build`, always behind a
     `Runtime`): the policy file `model_path` (empty: the shipped one) for 'dqn', else the
     reference controller `name`; PolicyLoadError in one line if it cannot be built."""
@@ -108,7 +115,7 @@ def build_policy(name: str, model_path: str, shield: str = "file", settings: str
     if name == DQN:
         spec = Path(model_path) if model_path else ""
     try:
-        return build(spec, shield=shield, settings=settings, layer=True)
+        return build(spec, layer=layer, settings=settings, as_runtime=True)
     except PolicyLoadError as exc:
         if name != DQN and name not in CONTROLLERS:  # the registry's refusal, as a parameter
             raise PolicyLoadError(f"controller {name!r}: {exc} (or 'dqn')") from None
@@ -138,8 +145,8 @@ class PolicyNode(ManagedNode):
         self.landers: dict[str, int] = {}  # states received per lander_id (non-empty ids)
 
     def _configure(self) -> str:
-        p = self._p
-        built = build_policy(p["controller"], p["model_path"], p["shield"], p["shield_settings"])
+        p = params.renamed(self, self._p, PARAMETERS, RENAMED)  # an old name warns here
+        built = build_policy(p["controller"], p["model_path"], p["layer"], p["layer_settings"])
         self.policy, self.model_file = built.runtime, str(built.policy_file or "")
         if self.controller_name == DQN:
             # Warm up numpy so the first real state is answered as fast as the rest (not the

@@ -141,6 +141,31 @@ def declare(
     return values
 
 
+def renamed(
+    node: Node,
+    values: Mapping[str, Any],
+    parameters: Mapping[str, Spec],
+    renames: Mapping[str, str],
+) -> dict[str, Any]:
+    """`values` with each deprecated parameter (`renames`: old name -> new, both declared) that
+    is set to other than its default given to its new name, with one warning line each naming
+    the new name; ParameterError in one line where the new one is set too, to another value."""
+    used = {old: new for old, new in renames.items() if values[old] != parameters[old][0]}
+    for old, new in used.items():
+        if values[new] not in (parameters[new][0], values[old]):
+            raise ParameterError(
+                f"parameters {old} (deprecated) and {new} disagree: {values[old]!r} and "
+                f"{values[new]!r}; set only {new}"
+            )
+    out = dict(values)
+    for old, new in used.items():
+        node.get_logger().warning(
+            f"parameter {old} is deprecated, use {new}: {values[old]!r} is flown as {new}"
+        )
+        out[new] = values[old]
+    return out
+
+
 def value(node: Node, name: str, parameters: Mapping[str, Spec]) -> Any:
     """The current (already checked) value of a run-time parameter, coerced to its type."""
     return coerce(name, parameters[name][0], node.get_parameter(name).value)

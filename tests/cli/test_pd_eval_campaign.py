@@ -68,7 +68,7 @@ def test_long_scenario_and_agent_names_keep_their_columns(tmp_path, capsys):
     f = tmp_path / "long.yaml"
     f.write_text("scenarios:\n  - {name: delay2-thrust-misalignment, delay_steps: 2}\n")
     argv = ["--controller", "zemzev", "--name", "zz", "--episodes", "4", "--dispersions", str(f)]
-    argv += ["--compare", "zemzev-behind-the-shield=shield:controller:zemzev"]
+    argv += ["--compare", "zemzev-behind-its-own-layer=layer:controller:zemzev"]
     assert pd_eval.main(argv + ["--out", str(tmp_path / "o"), "--no-progress"]) == 0
     rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("delay2-")]
     assert len(rows) == 2

@@ -136,7 +136,7 @@ def test_eval_of_a_policy_file_says_how_often_its_runtime_layer_changed_the_netw
         "--seed",
         "3",
         "--compare",
-        "zz=shield:controller:zemzev",
+        "zz=layer:controller:zemzev",
     ]
     assert pd_eval.main(argv) == 0
     out = capsys.readouterr().out

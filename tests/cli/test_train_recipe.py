@@ -52,7 +52,7 @@ def test_zemzev_recipe_stages_are_chained_pd_train_configs_inside_sixty_minutes(
     assert s1["preset"] == "best" and s1["init_policy"] in ("", None)
     for cfg in (s2, s3):
         assert cfg["preset"] == "robust" and cfg["controller"] == "zemzev-vernier"
-        assert cfg["shield"] is True and cfg["dispersions"] == "broad"
+        assert cfg["layer"] is True and cfg["dispersions"] == "broad"
         assert cfg["precision_bonus"] == pytest.approx(10.0)
         assert cfg["near_pad"] is True
     assert s1["near_pad"] is False  # stage 1 is the paper's network; stage 2 widens it
@@ -72,7 +72,7 @@ def test_ocp_recipe_learns_from_the_optimal_control_teacher_only_on_an_update_bu
     assert [c["preset"] for c in stages] == ["ocp", "ocp-dagger"]
     for cfg in stages:
         assert cfg["controller"] == "mpc-fuel-reserve-state" and cfg["demos"] == ""
-        assert cfg["shield"] is True
+        assert cfg["layer"] is True
     # stage 1 learns the `standard` dispersions; the DAgger rounds fly and label `broad`
     assert [c["dispersions"] for c in stages] == ["standard", "broad"]
     assert stages[0]["init_policy"] in ("", None) and stages[0]["label_episodes"] == 0
@@ -125,7 +125,7 @@ def test_ablation_arms_change_only_the_demonstrator_and_keep_the_budget(tmp_path
     assert none["demos"] == "" and none["controller"] == ""
     for cfg in (paper, none):
         assert cfg["preset"] == "ocp" and cfg["init_policy"] in ("", None)
-        assert cfg["shield"] is True and cfg["dispersions"] == "standard"
+        assert cfg["layer"] is True and cfg["dispersions"] == "standard"
         # one stage holds the two-stage recipe's gradient updates: stage 1's budget and the
         # pre-training updates of stage 2's rounds (the initial network's and dagger_rounds more)
         rounds = base[1]["dagger_rounds"] + 1

@@ -1,6 +1,7 @@
 """pd_bringup files agree with the nodes: every declared parameter is in the YAML with its
-default, and nothing else; the launch file compiles (it is not imported: no `launch` here), and
-run against stand-ins of the launch classes, it ends the stack when a node exits by itself."""
+default, and nothing else (the deprecated old names left out); the launch file compiles (it is
+not imported: no `launch` here), and run against stand-ins of the launch classes, it ends the
+stack when a node exits by itself."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pd_ocp_node.node import NODE_NAME as OCP
 from pd_ocp_node.node import PARAMETERS as OCP_PARAMS
 from pd_policy_node.node import NODE_NAME as POLICY
 from pd_policy_node.node import PARAMETERS as POLICY_PARAMS
+from pd_policy_node.node import RENAMED as POLICY_RENAMED
 from pd_sim_node.node import NODE_NAME as SIM
 from pd_sim_node.node import PARAMETERS as SIM_PARAMS
 
@@ -23,20 +25,21 @@ BRINGUP = Path(__file__).resolve().parents[2] / "pd_bringup"
 
 
 @pytest.mark.parametrize(
-    ("file", "node", "params"),
+    ("file", "node", "params", "deprecated"),
     [
-        ("sim.yaml", SIM, SIM_PARAMS),
-        ("policy.yaml", POLICY, POLICY_PARAMS),
-        ("ocp.yaml", OCP, OCP_PARAMS),
+        ("sim.yaml", SIM, SIM_PARAMS, {}),
+        ("policy.yaml", POLICY, POLICY_PARAMS, POLICY_RENAMED),
+        ("ocp.yaml", OCP, OCP_PARAMS, {}),
     ],
 )
-def test_yaml_holds_declared_defaults(file, node, params):
+def test_yaml_holds_declared_defaults(file, node, params, deprecated):
     data = yaml.safe_load((BRINGUP / "config" / file).read_text())
     values = data[f"/**/{node}"]["ros__parameters"]
-    assert set(values) == set(params)
-    for name, spec in params.items():
-        assert values[name] == spec[0], name
-        assert type(values[name]) is type(spec[0]), name  # 5.0 stays a double, 0 an integer
+    assert set(values) == set(params) - set(deprecated)
+    assert set(deprecated.values()) <= set(values)  # each old name's new one is there
+    for name in values:
+        assert values[name] == params[name][0], name
+        assert type(values[name]) is type(params[name][0]), name  # 5.0 stays a double, 0 an integer
 
 
 def test_launch_file_compiles():

@@ -30,8 +30,14 @@ def _run_until_exit(tmp_path, package: str, params: dict) -> tuple[int, str]:
         ("pd_sim_node", {"rate_hz": "abc"}, 2, "parameter rate_hz: expected a double"),
         ("pd_policy_node", {"stats_period_s": -1}, 2, "parameter stats_period_s: must be >= 0"),
         ("pd_policy_node", {"controller": "nope"}, 1, "controller 'nope': unknown controller"),
-        ("pd_policy_node", {"shield": "maybe"}, 2, "parameter shield: must be one of file, always"),
-        ("pd_policy_node", {"shield_settings": "gain=1"}, 1, "'gain' is unknown"),
+        ("pd_policy_node", {"layer": "maybe"}, 2, "parameter layer: must be one of file, always"),
+        ("pd_policy_node", {"layer_settings": "gain=1"}, 1, "'gain' is unknown"),
+        (  # a deprecated name beside its new one, disagreeing: refused, not guessed
+            "pd_policy_node",
+            {"shield": "never", "layer": "always"},
+            2,
+            "parameters shield (deprecated) and layer disagree: 'never' and 'always'",
+        ),
     ],
 )
 def test_bad_start_up_parameter_is_one_line(tmp_path, package, params, code, says):
@@ -58,15 +64,20 @@ def test_integers_accepted_for_doubles(tmp_path):
         procs.stop_all()
 
 
-def test_runtime_settings_change_the_layer_the_policy_flies(tmp_path):
-    """shield_settings 'nav_filter=0,touchdown_speed_mps=0': the node says which layer it flies."""
+@pytest.mark.parametrize("name", ["layer_settings", "shield_settings"])
+def test_runtime_settings_change_the_layer_the_policy_flies(tmp_path, name):
+    """layer_settings 'nav_filter=0,touchdown_speed_mps=0': the node says which layer it flies;
+    so does shield_settings, the deprecated old name, with one warning naming the new one."""
     procs = ProcessSet(tmp_path)
     try:
-        pol = procs.node(
-            "pd_policy_node", {"shield_settings": "nav_filter=0,touchdown_speed_mps=0"}
-        )
+        pol = procs.node("pd_policy_node", {name: "nav_filter=0,touchdown_speed_mps=0"})
         assert pol.wait_log("policy ready", START_S), pol.log()
         assert "runtime settings nav_filter=0,touchdown_speed_mps=0" in pol.log(), pol.log()
+        warned = [line for line in pol.log().splitlines() if "deprecated" in line]
+        assert len(warned) == (name == "shield_settings"), pol.log()
+        assert all(
+            "parameter shield_settings is deprecated, use layer_settings" in w for w in warned
+        )
         assert pol.stop() == 0, pol.log()
     finally:
         procs.stop_all()

@@ -1,6 +1,7 @@
 """pd_policy_node's `controller` parameter: a reference controller of pd_core flies the lander over
-ROS in lockstep, exactly as it flies offline (issue 10 item 5); so does the DQN behind the braking
-shield (`shield` parameter), and a reference controller behind it with shield "always"."""
+ROS in lockstep, exactly as it flies offline (issue 10 item 5); so does the DQN behind the runtime
+layer (`layer` parameter), and a reference controller behind it with layer "always" (also given
+by the parameter's deprecated old name, `shield`)."""
 
 from __future__ import annotations
 
@@ -61,11 +62,11 @@ class Loop:
 
 
 def offline(
-    controller: str, seed: int, steps: int | None = None, shield: str = "always"
+    controller: str, seed: int, steps: int | None = None, layer: str = "always"
 ) -> list[np.ndarray]:
     # what the node builds for these parameters (the shipped file for "dqn")
     spec = "" if controller == "dqn" else f"controller:{controller}"
-    ctl = build(spec, shield=shield, layer=True).runtime
+    ctl = build(spec, layer=layer, as_runtime=True).runtime
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=seed)
     states = [info["state"]]
@@ -79,25 +80,32 @@ def offline(
 
 
 @pytest.mark.parametrize(
-    ("name", "shield"), [("zemzev", "file"), ("zemzev", "always"), ("zemzev-vernier", "always")]
+    ("name", "parameter", "layer"),
+    [
+        ("zemzev", "layer", "file"),
+        ("zemzev", "layer", "always"),
+        ("zemzev-vernier", "shield", "always"),  # the deprecated old name: it warns, and flies
+    ],
 )
-def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, name, shield):
-    """shield "always" puts the reference controller behind the braking shield, as offline."""
+def test_zemzev_flies_over_ros_as_offline(sim, make_node, spin_until, name, parameter, layer):
+    """layer "always" puts the reference controller behind the runtime layer, as offline."""
     loop = Loop(make_node, spin_until)
-    episode, policy = loop.fly(sim, name, seed=8, shield=shield)
+    episode, policy = loop.fly(sim, name, seed=8, **{parameter: layer})
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
-    assert ("runtime layer on" in policy.log()) == (shield == "always")
+    assert ("runtime layer on" in policy.log()) == (layer == "always")
+    deprecated = "parameter shield is deprecated, use layer: 'always' is flown as layer"
+    assert (deprecated in policy.log()) == (parameter == "shield"), policy.log()
     result = next(r for r in loop.results if r.episode == episode)
-    expected = offline(name, 8, shield=shield)
+    expected = offline(name, 8, layer=layer)
     assert result.landed, result.reason
     assert result.steps == len(expected) - 1 and result.rejected_commands == 0
     np.testing.assert_array_equal(final_state(result), expected[-1])
 
 
-def test_shielded_dqn_flies_over_ros_as_offline(sim, make_node, spin_until):
+def test_dqn_behind_the_layer_flies_over_ros_as_offline(sim, make_node, spin_until):
     loop = Loop(make_node, spin_until)
-    episode, policy = loop.fly(sim, "dqn", seed=11, shield="always")
+    episode, policy = loop.fly(sim, "dqn", seed=11, layer="always")
     assert spin_until(lambda: any(r.episode == episode for r in loop.results), 120.0)
     assert policy.stop() == 0, policy.log()
     assert "runtime layer on, config " in policy.log(), policy.log()

@@ -43,6 +43,7 @@ MODULE_LAYER = {
             "actions",
             "commands",
             "config",
+            "deprecation",
             "discretise",
             "dispersions",
             "disturbance",

@@ -24,6 +24,7 @@ import numpy as np
 
 from pd_core import plots
 from pd_core.config import DT_S
+from pd_core.deprecation import show_as_lines
 from pd_core.dispersions import NOMINAL, Dispersions, load_scenarios
 from pd_core.episodes import Rollouts, rollout, summarise
 from pd_core.experiments.campaign import format_table, reachability, run_campaign, table, write_json
@@ -65,8 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=MODEL",
         help="other policies (or controllers as NAME=controller:zemzev) flown on the same "
         "episodes: Table 7 blocks side by side, Figs. 5 and 7. A file flies as its metadata "
-        "says (braking shield or not); bare:FILE flies the network alone, shield:FILE behind "
-        "the default braking shield, shield:controller:NAME the controller behind it; "
+        "says (runtime layer or not); bare:FILE flies the network alone, layer:FILE behind "
+        "the default runtime layer, layer:controller:NAME the controller behind it (shield: is "
+        "the deprecated old name of layer:); "
         "set:K=V,K=V:SPEC flies SPEC with those runtime-layer settings changed (e.g. "
         "set:nav_filter=0,touchdown_speed_mps=0:FILE)",
     )
@@ -117,6 +119,7 @@ def _split(spec: str) -> tuple[str, str]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    show_as_lines("pd-eval")  # an old spec prefix (shield:) is one line on stderr
     if bool(args.model) == bool(args.controller):
         print("pd-eval: give a model file or --controller (not both)", file=sys.stderr)
         return 2

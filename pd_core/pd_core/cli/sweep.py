@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from pd_core.deprecation import show_as_lines
 from pd_core.dqn.config import PRESETS
 
 
@@ -62,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    show_as_lines("pd-sweep")  # an old field name (shield=) is one line on stderr
     from pd_core.experiments import sweep  # imports Ray and torch: only when a sweep really runs
     from pd_core.ray_session import RayUnavailable, connect
 

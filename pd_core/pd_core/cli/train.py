@@ -16,9 +16,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import fields
 
-from pd_core.dqn.config import PRESETS, TrainConfig, add_arguments, check_config, from_args
+from pd_core.deprecation import show_as_lines
+from pd_core.dqn.config import (
+    PRESETS,
+    TrainConfig,
+    add_arguments,
+    check_config,
+    from_args,
+    given_fields,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,18 +63,15 @@ def join_ray(address: str) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    show_as_lines("pd-train")  # an old flag (--shield) is one line on stderr
     # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
     from pd_core.dqn.device_checkpoint import is_loop_checkpoint
     from pd_core.dqn.device_loop import DeviceLoop, uses_device_loop
     from pd_core.dqn.train import Trainer
 
     if args.resume:
-        overrides = {
-            f.name: getattr(args, f.name)
-            for f in fields(TrainConfig)
-            if f.name not in ("preset", "resume") and getattr(args, f.name, None) is not None
-        }
         try:
+            overrides = given_fields(args, ("preset", "resume"))
             if is_loop_checkpoint(args.resume):
                 return report(DeviceLoop.resume(args.resume, overrides).run(), args.json)
             trainer = Trainer.resume(args.resume, overrides)
@@ -78,8 +82,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"pd-train: {reason}", file=sys.stderr)
             return 2
     else:
-        cfg = from_args(args)
         try:
+            cfg = from_args(args)
             check_config(cfg)
         except ValueError as exc:
             print(f"pd-train: {exc}", file=sys.stderr)
@@ -111,11 +115,7 @@ def run_device_loop(cfg: TrainConfig, args: argparse.Namespace) -> int:
     """Train `cfg` and its `--agents` together in `pd_core.dqn.device_loop`; print summaries."""
     from pd_core.dqn.device_loop import DeviceLoop, agent_configs
 
-    overrides = {
-        f.name: getattr(args, f.name)
-        for f in fields(TrainConfig)
-        if f.name not in ("preset", "seed", "agents") and getattr(args, f.name, None) is not None
-    }
+    overrides = given_fields(args, ("preset", "seed", "agents"))
     try:
         cfgs, run_dirs = agent_configs(cfg, overrides)
         loop = DeviceLoop(cfgs, run_dirs)

@@ -98,7 +98,7 @@ def _label_chunk(
 ) -> dict[str, np.ndarray]:
     """Labels of episodes seed .. seed + n - 1 flown by the student behind the default layer
     (with `layer_settings` changed)."""
-    runtime = load_policy(policy_path, shield="always")
+    runtime = load_policy(policy_path, layer="always")
     if layer_settings:
         config = runtime.config.with_settings(layer_settings)
         runtime = Runtime(runtime.actor, config, runtime.actions, runtime.name, runtime.metadata)

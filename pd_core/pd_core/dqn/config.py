@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from pd_core.config import DQN_PAPER
+from pd_core.deprecation import renamed
 from pd_core.runtime.config import RuntimeConfig
 
 
@@ -52,7 +53,7 @@ class TrainConfig:
     thrust_input: bool = False
     """ours (issue 68): the first layer also sees the vertical thrust fraction the runtime layer
     counts on (pd_core.state.thrust_input: 0 nominal, 1 at 80 %), recorded with every
-    demonstration and label; needs shield and dagger_rounds (no interaction: the env's
+    demonstration and label; needs layer and dagger_rounds (no interaction: the env's
     observations do not have it). An init_policy without it is widened with zero weights"""
     input_norm_init: bool = False
     """fold a standardisation of the scaled inputs (mean/std of visited states) into the first
@@ -94,6 +95,9 @@ class TrainConfig:
     """margin l(a_E, a) for a != a_E in the large-margin loss"""
     demos: str = "data/demos_7x7x3.npz"
     """demonstration file (pd_core.demonstrations.open_loop format; empty: none)"""
+    demo_memory: str = ""
+    """a demonstration memory made by pd-demos for this config (pd_core.dqn.demo_file): trained
+    on as it is, nothing built or flown; refused if made for another config. Empty: build it"""
     controller_demo_episodes: int = 0
     """episodes flown by the reference controller (pd_core.teachers.zemzev) added as
     demonstrations"""
@@ -128,14 +132,15 @@ class TrainConfig:
     recovery_failed_share: float = 0.0
     """share of the recovery demonstrations started from episodes the student failed (searched
     for among further episodes) instead of from any episode"""
-    shield: bool = False
-    """the policy flies behind the braking shield of pd_core.runtime.rules: the periodic evaluations
-    (hence best.pt), the recovery search and the controller demonstrations fly with it (the
-    demonstrations hold the actions flown), and the saved policies' metadata asks for it.
-    Training episodes stay unshielded: shielding them left the overridden actions'
-    Q-values untrained and the median fuel drifted from 338 to 450 kg in 13 min"""
+    layer: bool = False
+    """the policy flies behind the runtime layer (pd_core.runtime: its braking limit and other
+    rules): the periodic evaluations (hence best.pt), the recovery search and the controller
+    demonstrations fly with it (the demonstrations hold the actions flown), and the saved
+    policies' metadata asks for it. Training episodes fly without it: with it, the overridden
+    actions' Q-values stayed untrained and the median fuel drifted from 338 to 450 kg in 13 min.
+    Once called shield (--shield and a config's "shield" still work, deprecated)"""
     layer_settings: str = ""
-    """with shield: runtime-layer settings changed from the code's default for the evaluations,
+    """with layer: runtime-layer settings changed from the code's default for the evaluations,
     the demonstrations, the DAgger student and the saved files, as pd-eval's set:K=V,K=V (e.g.
     brake_mass_loss=1,unmeasured_thrust=0.8; "": the default layer)"""
     init_policy: str = ""
@@ -201,6 +206,49 @@ class TrainConfig:
         d = dataclasses.asdict(self)
         d["hidden"] = list(self.hidden)
         return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], overrides: dict[str, Any] | None = None) -> TrainConfig:
+        """The config `to_dict` wrote (a run's config.json, a checkpoint's, a policy file's
+        training config), an old field name read as its new one (`current_names`), with
+        `overrides` (fields by their current names) changed."""
+        d = {**current_names(d), **(overrides or {})}
+        return cls(**{**d, "hidden": tuple(d["hidden"])})
+
+    @property
+    def shield(self) -> bool:
+        """Deprecated (it warns): the old name of `layer`."""
+        renamed("TrainConfig.shield", "TrainConfig.layer")
+        return self.layer
+
+    @shield.setter
+    def shield(self, value: bool) -> None:
+        renamed("TrainConfig.shield", "TrainConfig.layer")
+        self.layer = value
+
+
+RENAMED_FIELDS = {"shield": "layer"}
+"""old field names kept for one release: a config dict (an old run's config.json), `preset`'s
+overrides, a pd-train flag (--shield) and pd-sweep's FIELD=VALUE take them; old -> new"""
+
+
+def current_names(values: dict[str, Any], flags: bool = False) -> dict[str, Any]:
+    """`values` (field -> value) with an old name of RENAMED_FIELDS moved to its new one (it
+    warns; `flags`: named as pd-train flags); ValueError where both are given and disagree."""
+    out = dict(values)
+    for old, new in RENAMED_FIELDS.items():
+        if old not in out:
+            continue
+        value = out.pop(old)
+        if flags:
+            old_name, new_name = f"--{old.replace('_', '-')}", f"--{new.replace('_', '-')}"
+        else:
+            old_name, new_name = f"the training config field {old!r}", repr(new)
+        renamed(old_name, new_name)
+        if out.get(new, value) != value:
+            raise ValueError(f"{old_name} and {new_name} disagree (give only {new_name})")
+        out[new] = value
+    return out
 
 
 PRESETS: dict[str, dict[str, Any]] = {
@@ -272,7 +320,7 @@ PRESETS["ocp"] = {
     "controller": "mpc-fuel-reserve-state",
     "controller_demo_episodes": 1500,
     "demo_landed_only": True,
-    "shield": True,
+    "layer": True,
     "max_minutes": 0.0,
     "max_updates": 201_000,
     "eval_every_updates": 10_000,
@@ -389,12 +437,12 @@ def check_config(cfg: TrainConfig) -> None:
         raise ValueError(f"label_noise must be < 1, got {cfg.label_noise!r}")
     if cfg.dagger_rounds and not (cfg.label_episodes and cfg.batch_demo and cfg.pretrain_updates):
         raise ValueError("dagger_rounds needs label_episodes, batch_demo and pretrain_updates > 0")
-    if cfg.thrust_input and not (cfg.shield and cfg.dagger_rounds):
-        raise ValueError("thrust_input needs shield and dagger_rounds (it is the layer's figure)")
+    if cfg.thrust_input and not (cfg.layer and cfg.dagger_rounds):
+        raise ValueError("thrust_input needs layer and dagger_rounds (it is the layer's figure)")
     if cfg.thrust_input and (cfg.demos or cfg.recovery_demo_episodes):
         raise ValueError("thrust_input takes no demos file or recovery demonstrations (7 columns)")
-    if cfg.layer_settings and not cfg.shield:
-        raise ValueError("layer_settings needs shield (they change the runtime layer)")
+    if cfg.layer_settings and not cfg.layer:
+        raise ValueError("layer_settings needs layer (they change the runtime layer)")
     if cfg.layer_settings:
         RuntimeConfig().with_settings(cfg.layer_settings)  # an unknown setting fails here
     if cfg.device not in DEVICES:
@@ -413,7 +461,7 @@ def preset(name: str, **overrides: Any) -> TrainConfig:
     """TrainConfig of a preset with field overrides."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}")
-    return replace(TrainConfig(), preset=name, **{**PRESETS[name], **overrides})
+    return replace(TrainConfig(), preset=name, **{**PRESETS[name], **current_names(overrides)})
 
 
 def field_docs() -> dict[str, str]:
@@ -448,47 +496,60 @@ def _parse_tuple(s: str) -> tuple[int, ...]:
     return tuple(int(x) for x in v)
 
 
+def _flag(f: dataclasses.Field, help_: str) -> dict[str, Any]:
+    """`add_argument`'s keywords for the flag of field `f`."""
+    if f.name == "preset":
+        return {"default": "paper-agent1", "choices": sorted(PRESETS), "help": help_}
+    if f.type in ("bool", bool):
+        return {"type": _parse_bool, "nargs": "?", "const": True, "help": help_}
+    if f.name == "device":
+        return {"choices": DEVICES, "help": help_}
+    if f.name == "loop":
+        return {"choices": LOOPS, "help": help_}
+    if f.name == "hidden":
+        return {"type": _parse_tuple, "help": help_ + "; e.g. 300,200,300"}
+    return {"type": {"int": int, "float": float, "str": str}[str(f.type)], "help": help_}
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """One flag per field (`--batch-agent 100`); defaults are None so presets can fill them."""
+    """One flag per field (`--batch-agent 100`); defaults are None so presets can fill them.
+    An old name of RENAMED_FIELDS is a flag too (`--shield`, deprecated)."""
     docs = field_docs()
-    for f in fields(TrainConfig):
-        flag = "--" + f.name.replace("_", "-")
+    by_name = {f.name: f for f in fields(TrainConfig)}
+    for f in by_name.values():
         default = f.default if f.default is not dataclasses.MISSING else None
         text = docs.get(f.name, "").replace("%", "%%")  # argparse formats help with %
         help_ = f"{text} (preset default; base {default!r})"
-        if f.name == "preset":
-            parser.add_argument(flag, default="paper-agent1", choices=sorted(PRESETS), help=help_)
-        elif f.type in ("bool", bool):
-            parser.add_argument(flag, type=_parse_bool, nargs="?", const=True, help=help_)
-        elif f.name == "device":
-            parser.add_argument(flag, choices=DEVICES, help=help_)
-        elif f.name == "loop":
-            parser.add_argument(flag, choices=LOOPS, help=help_)
-        elif f.name == "hidden":
-            parser.add_argument(flag, type=_parse_tuple, help=help_ + "; e.g. 300,200,300")
-        else:
-            typ = {"int": int, "float": float, "str": str}[str(f.type)]
-            parser.add_argument(flag, type=typ, help=help_)
+        parser.add_argument("--" + f.name.replace("_", "-"), **_flag(f, help_))
+    for old, new in RENAMED_FIELDS.items():
+        help_ = f"deprecated: the old name of --{new.replace('_', '-')}"
+        parser.add_argument("--" + old.replace("_", "-"), dest=old, **_flag(by_name[new], help_))
+
+
+def given_fields(ns: argparse.Namespace, skip: tuple[str, ...] = ("preset",)) -> dict[str, Any]:
+    """The fields given as flags (not None), but those of `skip`; an old flag (--shield) gives
+    its new field (`current_names`: it warns, ValueError where both disagree)."""
+    names = [*(f.name for f in fields(TrainConfig)), *RENAMED_FIELDS]
+    given = {name: getattr(ns, name) for name in names if getattr(ns, name, None) is not None}
+    return {k: v for k, v in current_names(given, flags=True).items() if k not in skip}
 
 
 def from_args(ns: argparse.Namespace) -> TrainConfig:
-    overrides = {
-        f.name: getattr(ns, f.name)
-        for f in fields(TrainConfig)
-        if f.name != "preset" and getattr(ns, f.name, None) is not None
-    }
-    return preset(ns.preset, **overrides)
+    return preset(ns.preset, **given_fields(ns))
 
 
 __all__ = [
     "DEVICES",
     "LOOPS",
     "PRESETS",
+    "RENAMED_FIELDS",
     "TrainConfig",
     "add_arguments",
     "check_config",
+    "current_names",
     "field",
     "field_docs",
     "from_args",
+    "given_fields",
     "preset",
 ]

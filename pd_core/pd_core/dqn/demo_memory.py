@@ -92,7 +92,7 @@ def controller_steps(
     """1-step transitions of a reference controller (or the MPC teacher) flying the disturbed
     env under `dispersions` (from Table 3 or from `initial_states`), of every episode or only of
     those that landed; its success rate. The MPC teacher flies on every core. `behind_layer`:
-    the controller flies behind the runtime layer (a student trained with `shield` flies so).
+    the controller flies behind the runtime layer (a student trained with `layer` flies so).
     `address`: the episodes fly as Ray tasks there instead (any controller). `layer_settings`
     change that layer; `thrust_input`: the states carry the thrust fraction it counted on (the
     next state the next step's, or the same at an episode's end)."""
@@ -130,7 +130,7 @@ def recovery_starts(
     seed: int,
     dispersions: str = "",
     failed_share: float = 0.0,
-    shield: bool = False,
+    behind_layer: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """States (n_episodes, 7) the student policy visits, the env seed of the episode each came
     from, and the student's success rate. The student flies episodes seed.. under `dispersions`
@@ -138,9 +138,10 @@ def recovery_starts(
     of the states comes from episodes it did not land instead (searched for among the episodes
     that follow, up to FAILURE_SEARCH_FACTOR x n_episodes; several states per failed episode
     when it fails less often than that): the teacher then shows the way out of the student's
-    own crashes, which uniform draws rarely visit once the student lands 99 %. `shield`: the
-    student flies behind the braking shield (pd_core.runtime.rules) even if its file has none."""
-    student = load_policy(policy_path, shield="always" if shield else "file")
+    own crashes, which uniform draws rarely visit once the student lands 99 %. `behind_layer`:
+    the student flies behind the code's default runtime layer (pd_core.runtime.rules) even if
+    its file has none."""
+    student = load_policy(policy_path, layer="always" if behind_layer else "file")
     n_failed = round(failed_share * n_episodes)
     n_uniform = n_episodes - n_failed
     rng = np.random.default_rng(seed)
@@ -178,7 +179,7 @@ def recovery_steps(
     dispersions: str = "",
     landed_only: bool = False,
     failed_share: float = 0.0,
-    shield: bool = False,
+    behind_layer: bool = False,
     address: str = "",
 ) -> tuple[PhysicalSteps, float, float]:
     """Teacher `name` flying on from states the student visits (DAgger-style demonstrations:
@@ -186,10 +187,10 @@ def recovery_steps(
     loss has them too), each in the episode (env seed: scenario, draws, gusts) the state came
     from: the steps, the teacher's success rate from those states and the student's."""
     starts, seeds, student = recovery_starts(
-        policy_path, n_episodes, seed, dispersions, failed_share, shield
+        policy_path, n_episodes, seed, dispersions, failed_share, behind_layer
     )
     steps, teacher = controller_steps(
-        name, n_episodes, seed, dispersions, landed_only, starts, seeds, shield, address
+        name, n_episodes, seed, dispersions, landed_only, starts, seeds, behind_layer, address
     )
     return steps, teacher, student
 
@@ -262,7 +263,7 @@ def build_demo_memory(
                 seed,
                 cfg.dispersions,
                 cfg.demo_landed_only,
-                behind_layer=cfg.shield,
+                behind_layer=cfg.layer,
                 address=cfg.address,
                 layer_settings=cfg.layer_settings,
                 thrust_input=cfg.thrust_input,
@@ -276,7 +277,7 @@ def build_demo_memory(
                     "success_rate": success,
                     "landed_only": cfg.demo_landed_only,
                     "dispersions": cfg.dispersions or "nominal",
-                    "behind_layer": cfg.shield,
+                    "behind_layer": cfg.layer,
                 }
             )
     if cfg.batch_demo > 0 and cfg.recovery_demo_episodes > 0 and names:
@@ -291,7 +292,7 @@ def build_demo_memory(
             cfg.dispersions,
             cfg.demo_landed_only,
             cfg.recovery_failed_share,
-            cfg.shield,
+            cfg.layer,
             cfg.address,
         )
         parts.append(demo_transitions(steps, cfg, reward_cfg))

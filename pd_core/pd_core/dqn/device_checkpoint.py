@@ -74,10 +74,7 @@ def read_loop_checkpoint(
     ckpt, state = read_checkpoint(path)
     if state.get("loop") != LOOP:
         raise ValueError(f"{ckpt}: a reference-loop checkpoint (resume with --loop reference)")
-    cfgs = []
-    for d in json.loads(state["configs"]):
-        d["hidden"] = tuple(d["hidden"])
-        cfgs.append(TrainConfig(**{**d, **(overrides or {})}))
+    cfgs = [TrainConfig.from_dict(d, overrides) for d in json.loads(state["configs"])]
     return ckpt, state, cfgs, [Path(p) for p in json.loads(state["run_dirs"])]
 
 

@@ -50,7 +50,7 @@ from tqdm import tqdm
 from pd_core.dqn.agent import epsilon_at
 from pd_core.dqn.checkpoint import write_checkpoint
 from pd_core.dqn.config import TrainConfig, check_config, preset
-from pd_core.dqn.demo_memory import build_demo_memory
+from pd_core.dqn.demo_file import demo_memory_for
 from pd_core.dqn.device import describe_device, resolve_device
 from pd_core.dqn.device_checkpoint import loop_state, read_loop_checkpoint, restore
 from pd_core.dqn.minibatch import DEMO, REPLAY, MinibatchPlan, minibatch_plan
@@ -241,7 +241,7 @@ class DeviceLoop:
         for i, cfg in enumerate(cfgs):
             torch.manual_seed(cfg.seed)  # the reference loop's first draw: the same weights
             nets.append(QNetwork(7, 147, tuple(cfg.hidden)))
-            demo, info = build_demo_memory(cfg, training_reward(cfg))
+            demo, info = demo_memory_for(cfg, training_reward(cfg))
             demos.append(demo)
             run_dir = Path(run_dirs[i]) if run_dirs else run_folder(cfg)
             run_dir.mkdir(parents=True, exist_ok=True)

@@ -31,7 +31,8 @@ from pd_core.dqn.checkpoint import (
     write_checkpoint,
 )
 from pd_core.dqn.config import TrainConfig, check_config
-from pd_core.dqn.demo_memory import build_demo_memory, label_part
+from pd_core.dqn.demo_file import DEMO_FILE, demo_memory_for, write_demo_file
+from pd_core.dqn.demo_memory import label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
 from pd_core.dqn.loop import TrainingLoop
 from pd_core.dqn.minibatch import DEMO, REPLAY, minibatch_plan
@@ -72,7 +73,7 @@ def policy_metadata(cfg: TrainConfig, extra: dict[str, Any] | None = None) -> di
 def runtime_config_for(cfg: TrainConfig) -> RuntimeConfig:
     """What a network trained with `cfg` flies behind: the default runtime layer with
     `cfg.layer_settings` changed (`RuntimeConfig.with_settings`), or none."""
-    if not cfg.shield:
+    if not cfg.layer:
         return RuntimeConfig.off()
     layer = RuntimeConfig()
     return layer.with_settings(cfg.layer_settings) if cfg.layer_settings else layer
@@ -165,12 +166,15 @@ class Trainer(TrainingLoop):
             self.replay_gen.manual_seed(cfg.seed)
         self._device_update: DeviceUpdate | None = None
         self._q_cpu: Any = None
-        if restore is None:
-            self.demo, self.demo_info = build_demo_memory(cfg, self.reward_cfg)
+        if restore is None:  # data first: read or build the demonstrations, then train
+            self.demo, self.demo_info = demo_memory_for(cfg, self.reward_cfg)
         else:
             self.demo, self.demo_info = None, {}
         self.run_dir = run_dir or run_folder(cfg)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        if restore is None and self.demo is not None and not cfg.demo_memory:
+            # the memory built, with its provenance: `pd-train --demo-memory` trains on it again
+            write_demo_file(self.run_dir / DEMO_FILE, self.demo, cfg, self.demo_info)
         if cfg.init_policy and restore is None:
             self._init_from_policy(cfg.init_policy)
         if cfg.input_norm_init and restore is None:
@@ -212,12 +216,8 @@ class Trainer(TrainingLoop):
         (e.g. a later `max_minutes`, or `device`: a checkpoint loads on any device, and exactly
         on the path that wrote it)."""
         ckpt, state = read_checkpoint(path)
-        d = json.loads(state["config"])
-        d["hidden"] = tuple(d["hidden"])
-        d.update(overrides or {})
-        return cls(
-            TrainConfig(**d), run_dir=ckpt.parent, on_eval=on_eval, restore=state, replay=replay
-        )
+        cfg = TrainConfig.from_dict(json.loads(state["config"]), overrides)
+        return cls(cfg, run_dir=ckpt.parent, on_eval=on_eval, restore=state, replay=replay)
 
     def _init_from_policy(self, path: str) -> None:
         """Start both networks from a shipped policy (fine-tuning; a paper network is widened

@@ -31,7 +31,7 @@ from ray import tune
 
 from pd_core import plots
 from pd_core.dqn.checkpoint import CHECKPOINT
-from pd_core.dqn.config import TrainConfig, preset
+from pd_core.dqn.config import TrainConfig, current_names, preset
 from pd_core.dqn.train import Trainer
 
 SPEC = "sweep.json"
@@ -52,15 +52,18 @@ def parse_value(field: str, text: str) -> Any:
 
 
 def parse_assignments(items: list[str], many: bool) -> dict[str, Any]:
-    """FIELD=VALUE (many: FIELD=V1,V2,... ; `hidden` lists use 'x': 300x200x300) pairs."""
-    out: dict[str, Any] = {}
+    """FIELD=VALUE (many: FIELD=V1,V2,... ; `hidden` lists use 'x': 300x200x300) pairs; an old
+    field name (shield) is its new one (`current_names`: it warns)."""
+    texts: dict[str, str] = {}
     for item in items:
         if "=" not in item:
             raise ValueError(f"expected FIELD=VALUE, got {item!r}")
         k, v = item.split("=", 1)
-        k = k.strip().replace("-", "_")
-        out[k] = [parse_value(k, x) for x in v.split(",")] if many else parse_value(k, v)
-    return out
+        texts[k.strip().replace("-", "_")] = v
+    return {
+        k: [parse_value(k, x) for x in v.split(",")] if many else parse_value(k, v)
+        for k, v in current_names(texts).items()
+    }
 
 
 def slug(preset_name: str, overrides: dict[str, Any]) -> str:

@@ -8,18 +8,21 @@ A spec is a path, a string (the syntax of `pd-eval` and campaigns) or a factory:
                              always a file, never parsed as below)
     ""                       the shipped policy file (`shipped_policy`), likewise
     bare:FILE                the network alone (`RuntimeConfig.off()`)
-    shield:FILE              the network behind the code's default config (`RuntimeConfig()`)
+    layer:FILE               the network behind the code's default config (`RuntimeConfig()`)
     controller:NAME          the reference controller alone, no `Runtime` (so is
                              bare:controller:NAME)
-    shield:controller:NAME   the reference controller behind the default config
+    layer:controller:NAME    the reference controller behind the default config
     set:K=V[,K=V...]:SPEC    SPEC, which must have a layer, with those `RuntimeConfig` settings
                              changed (`RuntimeConfig.with_settings`)
     a callable               spec() is the actor, as it is made (a picklable one crosses to
                              Ray)
 
+``shield:`` is the old name of ``layer:`` (deprecated: it flies the same and warns once,
+`pd_core.deprecation`).
+
 `build`'s keywords say the same for a caller that holds the parts (the policy node's
-parameters): `shield` ("file", "always", "never") is the ``shield:``/``bare:`` prefix, `settings`
-a ``set:`` around the whole, and `layer=True` puts an actor built without a layer behind
+parameters): `layer` ("file", "always", "never") is the ``layer:``/``bare:`` prefix, `settings`
+a ``set:`` around the whole, and `as_runtime=True` puts an actor built without a layer behind
 `RuntimeConfig.off()`, so that what comes back is always a `Runtime`.
 
 The shipped file is found where the policy node has always looked (`shipped_policy`): the
@@ -39,9 +42,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from pd_core.deprecation import renamed
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Actor, Runtime
-from pd_core.runtime.policy_file import SHIELD_MODES, SHIPPED_POLICY, PolicyLoadError, load_policy
+from pd_core.runtime.policy_file import (
+    SHIPPED_POLICY,
+    PolicyLoadError,
+    check_layer_mode,
+    load_policy,
+)
 from pd_core.teachers.registry import make_controller
 
 AgentSpec = str | Path | Callable[[], Actor | Runtime]
@@ -52,7 +61,9 @@ MODEL_ENV = "PD_MODEL_PATH"
 ROOT_ENV = "PD_ROOT"
 """Environment variable naming the repository root, set by env.sh (`shipped_policy`)."""
 CONTROLLER = "controller:"
-_MODES = {"bare:": "never", "shield:": "always"}  # spec prefix -> `load_policy` shield mode
+# spec prefix -> `load_policy`'s layer mode; "shield:" the old name of "layer:" (deprecated)
+_MODES = {"bare:": "never", "layer:": "always", "shield:": "always"}
+_RENAMED = {"shield:": "layer:"}
 
 
 @dataclass(frozen=True)
@@ -62,7 +73,7 @@ class Built:
     actor: Actor | Runtime
     """a `Runtime` (a policy file; a controller behind a layer), or a controller alone"""
     label: str
-    """short name: the policy file's stem, "controller NAME" (+ " + shield"), a factory's
+    """short name: the policy file's stem, "controller NAME" (+ " + layer"), a factory's
     name; " (K=V,...)" added for runtime settings changed"""
     policy_file: Path | None = None
     """the policy file flown (None: a controller or a factory)"""
@@ -72,7 +83,7 @@ class Built:
     @property
     def runtime(self) -> Runtime:
         """The actor as a `Runtime`; PolicyLoadError if it flies without one (build it with
-        `layer=True`)."""
+        `as_runtime=True`)."""
         if not isinstance(self.actor, Runtime):
             raise PolicyLoadError(f"{self.label} flies without a runtime layer")
         return self.actor
@@ -115,35 +126,36 @@ def shipped_policy() -> Path:
 
 
 def build(
-    spec: AgentSpec = "", *, shield: str = "file", settings: str = "", layer: bool = False
+    spec: AgentSpec = "", *, layer: str = "file", settings: str = "", as_runtime: bool = False
 ) -> Built:
-    """What flies for `spec` (module docstring; "" the shipped policy file), with the layer of
-    `shield` ("file": as the spec says; "always" as ``shield:``; "never" as ``bare:``; a prefix
-    in the spec wins), the runtime `settings` changed (as ``set:settings:SPEC``), and, with
-    `layer`, an actor built without a layer put behind `RuntimeConfig.off()` (its settings
-    then change that config). PolicyLoadError in one line if it cannot be built."""
-    if shield not in SHIELD_MODES:
-        raise ValueError(f"shield must be one of {', '.join(SHIELD_MODES)}, got {shield!r}")
+    """What flies for `spec` (module docstring; "" the shipped policy file), with the runtime
+    layer of `layer` ("file": as the spec says; "always" as ``layer:``; "never" as ``bare:``; a
+    prefix in the spec wins), the runtime `settings` changed (as ``set:settings:SPEC``), and,
+    with `as_runtime`, an actor built without a layer put behind `RuntimeConfig.off()` (its
+    settings then change that config). PolicyLoadError in one line if it cannot be built."""
+    check_layer_mode(layer)
     if isinstance(spec, Path):
-        built = _policy_file(spec, shield)
+        built = _policy_file(spec, layer)
     elif callable(spec):
         built = Built(spec(), getattr(spec, "__name__", "agent"))
     else:
-        built = _from_spec(spec, shield)
-    if layer and not isinstance(built.actor, Runtime):
+        built = _from_spec(spec, layer)
+    if as_runtime and not isinstance(built.actor, Runtime):
         name = getattr(built.actor, "name", "")
         built = replace(built, actor=Runtime(built.actor, RuntimeConfig.off(), name=name))
     return _with_settings(built, settings) if settings else built
 
 
-def _from_spec(spec: str, shield: str) -> Built:
-    """`build` of a spec string, `shield` the mode where the spec has no prefix."""
+def _from_spec(spec: str, layer: str) -> Built:
+    """`build` of a spec string, `layer` the mode where the spec has no prefix."""
     if spec.startswith("set:"):
         settings, _, inner = spec[len("set:") :].partition(":")
-        return _with_settings(_from_spec(inner, shield), settings)
-    mode = shield
+        return _with_settings(_from_spec(inner, layer), settings)
+    mode = layer
     for prefix, prefixed in _MODES.items():
         if spec.startswith(prefix):
+            if prefix in _RENAMED:
+                renamed(f"the spec prefix {prefix!r}", repr(_RENAMED[prefix]), stacklevel=1)
             spec, mode = spec[len(prefix) :], prefixed
             break
     if spec.startswith(CONTROLLER):
@@ -154,14 +166,14 @@ def _from_spec(spec: str, shield: str) -> Built:
             raise PolicyLoadError(str(exc)) from None
         if mode != "always":
             return Built(controller, f"controller {name}")
-        shielded = Runtime(controller, RuntimeConfig(), name=name)
-        return Built(shielded, f"controller {name} + shield")
+        behind = Runtime(controller, RuntimeConfig(), name=name)
+        return Built(behind, f"controller {name} + layer")
     return _policy_file(Path(spec) if spec else shipped_policy(), mode)
 
 
-def _policy_file(path: Path, shield: str) -> Built:
-    """The policy file at `path` behind the layer of `shield` (`load_policy`)."""
-    return Built(load_policy(path, shield=shield), path.stem, path)
+def _policy_file(path: Path, layer: str) -> Built:
+    """The policy file at `path` behind the runtime layer of `layer` (`load_policy`)."""
+    return Built(load_policy(path, layer=layer), path.stem, path)
 
 
 def _with_settings(built: Built, settings: str) -> Built:
@@ -170,7 +182,7 @@ def _with_settings(built: Built, settings: str) -> Built:
     if not isinstance(rt, Runtime):
         raise PolicyLoadError(
             f"runtime settings {settings!r}: {built.label} has no runtime layer to change "
-            "(a policy file has; a controller has behind shield:controller:NAME)"
+            "(a policy file has; a controller has behind layer:controller:NAME)"
         )
     try:
         config = rt.config.with_settings(settings)

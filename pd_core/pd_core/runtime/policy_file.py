@@ -23,6 +23,7 @@ import numpy as np
 
 from pd_core.actions import ActionSpace
 from pd_core.config import DT_S, N_ACTIONS_PER_AXIS, RL_THRUST, STATE_SCALE, ThrustLimits
+from pd_core.deprecation import renamed, renamed_argument
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.runtime.network import NumpyQNetwork
@@ -33,13 +34,29 @@ SHIPPED_POLICY = Path("models") / "pd_dqn_adapt.pt"
 repository root: the optimal-control student that sees its layer's thrust fraction, trained
 from optimal-control teachers alone by `scripts/train_recipe.sh --adapt --seed 1`
 (models/pd_dqn_adapt.md; its stage 2 is models/pd_dqn_ocp.pt)."""
-SHIELD_MODES = ("file", "always", "never")
-"""`load_policy(shield=...)`: the runtime config the file pins; the code's default runtime
+LAYER_MODES = ("file", "always", "never")
+"""`load_policy(layer=...)`: the runtime config the file pins; the code's default runtime
 config (`RuntimeConfig()`); or none (`RuntimeConfig.off()`: the bare network)"""
+RENAMED = {"SHIELD_MODES": "LAYER_MODES"}
+"""old module names kept for one release (`__getattr__`): old -> new"""
 
 
 class PolicyLoadError(ValueError):
     """A policy file is missing, unreadable or does not match the code."""
+
+
+def check_layer_mode(layer: str) -> None:
+    """ValueError in one line unless `layer` is one of `LAYER_MODES`."""
+    if layer not in LAYER_MODES:
+        raise ValueError(f"layer must be one of {', '.join(LAYER_MODES)}, got {layer!r}")
+
+
+def __getattr__(name: str) -> Any:
+    """An old name of `RENAMED` (deprecated: it warns) is its new one."""
+    if name in RENAMED:
+        renamed(f"{__name__}.{name}", f"{__name__}.{RENAMED[name]}")
+        return globals()[RENAMED[name]]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def code_version() -> str:
@@ -224,13 +241,14 @@ def read_policy(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return meta, state
 
 
-def load_policy(path: str | Path, shield: str = "file") -> Runtime:
+def load_policy(path: str | Path, layer: str = "file", *, shield: str | None = None) -> Runtime:
     """The `Runtime` that flies the policy file at `path` (`.pt`, `.json` or no suffix):
-    the network behind the runtime config the file pins (`shield="file"`), behind the code's
+    the network behind the runtime layer the file pins (`layer="file"`), behind the code's
     default config ("always"), or alone ("never"). PolicyLoadError in one line if the file is
-    missing, unreadable, hostile or does not match the code."""
-    if shield not in SHIELD_MODES:
-        raise ValueError(f"shield must be one of {', '.join(SHIELD_MODES)}, got {shield!r}")
+    missing, unreadable, hostile or does not match the code. `shield`: the old name of `layer`
+    (deprecated: it warns)."""
+    layer = renamed_argument("load_policy", "shield", shield, "layer", layer, "file")
+    check_layer_mode(layer)
     meta, state = read_policy(path)
     js = paths_for(path)[1]
     try:
@@ -239,7 +257,7 @@ def load_policy(path: str | Path, shield: str = "file") -> Runtime:
         raise PolicyLoadError(f"{js}: bad runtime config: {_one_line(exc)}") from exc
     dtype = filed.network_dtype
     config = {"file": filed, "always": RuntimeConfig(network_dtype=dtype)}.get(
-        shield, RuntimeConfig.off(dtype)
+        layer, RuntimeConfig.off(dtype)
     )
     shape = meta["network"]
     network = NumpyQNetwork(

@@ -63,7 +63,7 @@ RESERVE_STATE_PARAMS = replace(RESERVE_PARAMS, handover_from_state=True)
 # `RulesConfig.brake_mass_loss`) on the vertical thrust fraction the layer counts on this step
 # (`MPCParams.layer_thrust_fraction`: the identified gain, or `unmeasured_thrust` until measured).
 # Fly it behind a layer with the same settings, e.g.
-# `set:brake_mass_loss=1,unmeasured_thrust=0.8:shield:controller:mpc-fuel-reserve-state-ml`
+# `set:brake_mass_loss=1,unmeasured_thrust=0.8:layer:controller:mpc-fuel-reserve-state-ml`
 # (docs/experiments/2026-12-04-teacher-inside-the-new-limit.md).
 RESERVE_STATE_ML_PARAMS = replace(
     RESERVE_STATE_PARAMS, brake_mass_loss=True, layer_thrust_fraction=True

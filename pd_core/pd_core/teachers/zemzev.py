@@ -73,7 +73,7 @@ class ZemZevParams:
     # floor 2 s) made a noisy or delayed lander touch down at 2 m/s sideways (`all-broad` 88 %).
     # The vernier bounds the sideways speed (0.4 m/s) and its gain keeps K dt = 0.4, stable under
     # two steps of delay (z^3 - z^2 + K dt has its roots inside the unit circle up to 0.62).
-    # Its cost: behind the shield, two steps of delay (`delay-2` of `broad`, 8000 episodes)
+    # Its cost: behind the layer, two steps of delay (`delay-2` of `broad`, 8000 episodes)
     # land 71.9 % against 75.5 %: the limit cycle of the quantised loop adds sideways speed to
     # touchdowns already near 2 m/s. A gain of 1.5/s costs nothing there but lands 0.69 m off.
 
@@ -141,7 +141,7 @@ def lateral_brake_accel_mps2(
     """Deceleration (B,) of the braking profile that leaves full lateral thrust (`max_thrust_n`
     (3,), N) time to bring the sideways motion of physical states (B, 7) to rest at the pad,
     floored at `min_brake_accel_mps2` (keep descending). Where it is below the profile's own
-    deceleration the teacher's lateral limit binds (also the shield's handover condition)."""
+    deceleration the teacher's lateral limit binds (also the layer's handover condition)."""
     s = np.atleast_2d(states)
     hi = np.asarray(max_thrust_n, dtype=float)
     t_lat = min_time_to_rest_s(s[:, 0:2], s[:, 3:5], hi[0:2] / s[:, 6:7]).max(axis=1)

@@ -20,13 +20,13 @@ POLICY = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_best.pt")
 
 def test_labels_are_the_teachers_actions_on_the_states_the_student_flies() -> None:
     d = student_labels(POLICY, "zemzev", 3, 21, dispersions="delay", workers=1)
-    flown = rollout(load_policy(POLICY, shield="always"), 3, 21, dispersions="delay")
+    flown = rollout(load_policy(POLICY, layer="always"), 3, 21, dispersions="delay")
     assert len(d["labels"]) == len(d["states"]) == len(d["proposed"]) == flown.steps.sum()
     np.testing.assert_array_equal(d["landed"], flown.landed)
     # ZEM/ZEV keeps no memory: its labels are its actions on those states, and the student's
     # own proposals are its network's; the two disagree somewhere (else nothing to learn)
     np.testing.assert_array_equal(d["labels"], ZemZevController().act_batch(d["states"]))
-    net = load_policy(POLICY, shield="never").actor
+    net = load_policy(POLICY, layer="never").actor
     np.testing.assert_array_equal(d["proposed"], net.act_batch(d["states"]))
     assert 0.0 < np.mean(d["labels"] != d["proposed"]) < 1.0
 
@@ -43,7 +43,7 @@ def test_label_noise_flies_random_actions_on_that_share_of_steps_and_labels_them
     assert len(d["states"]) != len(clean["states"])  # the flights differ
     # every state is still labelled by the teacher, and proposed is still the network's own
     np.testing.assert_array_equal(d["labels"], ZemZevController().act_batch(d["states"]))
-    net = load_policy(POLICY, shield="never").actor
+    net = load_policy(POLICY, layer="never").actor
     np.testing.assert_array_equal(d["proposed"], net.act_batch(d["states"]))
 
 

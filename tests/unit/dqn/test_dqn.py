@@ -339,7 +339,7 @@ def test_config_flags_and_presets():
     # issue 32: from scratch, and every demonstration from the optimal-control teacher
     ocp = preset("ocp")
     assert ocp.init_policy == "" and ocp.demos == "" and ocp.controller == "mpc-fuel-reserve-state"
-    assert ocp.controller_demo_episodes > 0 and ocp.shield and ocp.batch_demo > 0
+    assert ocp.controller_demo_episodes > 0 and ocp.layer and ocp.batch_demo > 0
     dagger = preset("ocp-dagger")  # its rounds label with the same teacher, no other source
     assert dagger.controller == "mpc-fuel-reserve-state" and dagger.demos == ""
     assert dagger.dagger_rounds > 0 and dagger.label_episodes > 0

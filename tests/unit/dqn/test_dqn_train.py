@@ -202,16 +202,16 @@ def test_failure_weighted_scenarios_follow_training_failures_and_resume(tmp_path
     assert rows[0].startswith("wall_s,episodes,p_nominal,p_all,fail_nominal,fail_all")
 
 
-def test_shielded_run_evaluates_behind_the_shield_and_files_ask_for_it(tmp_path):
-    tr = Trainer(_small(tmp_path, "sh", seed=5, shield=True), quiet=True)
+def test_a_run_with_the_layer_evaluates_behind_it_and_files_ask_for_it(tmp_path):
+    tr = Trainer(_small(tmp_path, "sh", seed=5, layer=True), quiet=True)
     tr.run()
     assert load_policy(tmp_path / "sh" / "final.pt").config == RuntimeConfig()
-    # an untrained network crashes; behind the shield it touches down far slower, and the
-    # periodic evaluation (which picks best.pt) is the shielded flight
-    shielded = rollout(Runtime(TorchGreedy(tr.agent.q), RuntimeConfig()), 20, 0)
+    # an untrained network crashes; behind the layer it touches down far slower, and the
+    # periodic evaluation (which picks best.pt) is the flight behind the layer
+    behind = rollout(Runtime(TorchGreedy(tr.agent.q), RuntimeConfig()), 20, 0)
     bare = rollout(TorchGreedy(tr.agent.q), 20, 0)
-    assert shielded.final_states[:, 5].min() > bare.final_states[:, 5].min() + 5.0
-    vk = summarise(shielded)["table7"]["k_velocity_mps"]["min"]
+    assert behind.final_states[:, 5].min() > bare.final_states[:, 5].min() + 5.0
+    vk = summarise(behind)["table7"]["k_velocity_mps"]["min"]
     assert tr.evaluate(episodes=20, seed=0)["kvel_min"] == pytest.approx(vk, abs=1e-9)
 
 

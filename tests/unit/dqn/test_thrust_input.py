@@ -100,7 +100,7 @@ def test_the_layer_hands_over_80_percent_until_the_engine_is_measured() -> None:
 
 
 def test_shadow_teacher_records_the_fraction_with_each_state_and_labels_carry_it() -> None:
-    student = load_policy("models/pd_dqn_ocp.pt", shield="never").actor
+    student = load_policy("models/pd_dqn_ocp.pt", layer="never").actor
     shadow = ShadowTeacher(student, make_controller("mpc-fuel-reserve-state-ml"))
     runtime = Runtime(shadow, RuntimeConfig().with_settings(CANDIDATE))
     rollout(runtime, 2, 0)
@@ -120,7 +120,7 @@ def test_the_thrust_input_needs_the_layer_and_dagger_rounds() -> None:
     assert cfg.controller == "mpc-fuel-reserve-state-lf"
     for bad in (
         preset("ocp", thrust_input=True),
-        preset("ocp-adapt", shield=False),
+        preset("ocp-adapt", layer=False),
         preset("ocp-adapt", demos="data/demos_7x7x3.npz"),
         preset("ocp-dagger", layer_settings="no_such_setting=1"),
     ):

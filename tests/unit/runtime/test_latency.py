@@ -110,7 +110,7 @@ def test_the_vertical_thrust_scale_is_the_identified_vertical_gain():
 
 def test_under_navigation_noise_the_window_measure_bounds_the_shortfall_sooner():
     """12 % thrust errors and 3 m / 0.3 m/s of navigation noise, 6 s of full vertical thrust:
-    the bound the shield uses lies at most 0.1 above each lander's delivered vertical fraction
+    the bound the layer uses lies at most 0.1 above each lander's delivered vertical fraction
     and not below it; the per-step filter's bound alone is looser than that on some landers (the
     noise enters every step's velocity change, and a window's change only once)."""
     d = Dispersions("short-noisy", thrust_error=0.12, nav_position_sigma_m=3.0,

@@ -43,13 +43,13 @@ def test_the_shipped_policy_is_found_as_the_node_always_found_it(monkeypatch, tm
 def test_every_spec_builds_what_it_always_built():
     assert build(str(ROBUST)).actor.config == build(ROBUST).actor.config
     assert build(f"bare:{ROBUST}").actor.config.is_off
-    assert build(f"shield:{ROBUST}").actor.config == RuntimeConfig()
+    assert build(f"layer:{ROBUST}").actor.config == RuntimeConfig()
     alone = build("controller:zemzev")
     assert isinstance(alone.actor, ZemZevController) and alone.label == "controller zemzev"
     assert isinstance(build("bare:controller:zemzev").actor, ZemZevController)
-    shielded = build("shield:controller:zemzev-vernier")
-    assert shielded.label == "controller zemzev-vernier + shield"
-    assert shielded.runtime.config == RuntimeConfig() and shielded.runtime.name == "zemzev-vernier"
+    behind = build("layer:controller:zemzev-vernier")
+    assert behind.label == "controller zemzev-vernier + layer"
+    assert behind.runtime.config == RuntimeConfig() and behind.runtime.name == "zemzev-vernier"
     changed = build(f"set:touchdown_speed_mps=0:{ROBUST}")
     assert changed.label == "pd_dqn_robust (touchdown_speed_mps=0)"
     assert changed.runtime.config.rules.touchdown_speed_mps == 0.0
@@ -62,23 +62,23 @@ def test_every_spec_builds_what_it_always_built():
 
 
 def test_the_keywords_say_what_the_policy_nodes_parameters_say():
-    """shield "never"/"always" are the bare:/shield: prefixes; `layer` keeps a controller in a
-    Runtime (behind `RuntimeConfig.off()`, whose settings may then change); the one line the
+    """layer "never"/"always" are the bare:/layer: prefixes; `as_runtime` keeps a controller in
+    a Runtime (behind `RuntimeConfig.off()`, whose settings may then change); the one line the
     node logs."""
-    never = build(ROBUST, shield="never", layer=True)
+    never = build(ROBUST, layer="never", as_runtime=True)
     assert never.runtime.config.is_off and never.policy_file == ROBUST
-    assert build(ROBUST, shield="always").runtime.config == RuntimeConfig()
-    ctl = build("controller:zemzev", shield="never", layer=True)
+    assert build(ROBUST, layer="always").runtime.config == RuntimeConfig()
+    ctl = build("controller:zemzev", layer="never", as_runtime=True)
     assert ctl.runtime.config.is_off and ctl.runtime.name == "zemzev"
     assert ctl.describe().startswith("reference controller zemzev (")
     assert ", no runtime layer, config " in ctl.describe()
-    tuned = build("controller:zemzev", settings="touchdown_speed_mps=0", layer=True)
+    tuned = build("controller:zemzev", settings="touchdown_speed_mps=0", as_runtime=True)
     assert tuned.runtime.config.rules.touchdown_speed_mps == 0.0
     assert "runtime settings touchdown_speed_mps=0" in tuned.describe()
-    line = build(ROBUST, shield="always", layer=True).describe()
+    line = build(ROBUST, layer="always", as_runtime=True).describe()
     assert line.startswith(f"{ROBUST} (network ") and ", runtime layer on, config " in line
     assert (
-        build(ROBUST, shield="never")
+        build(ROBUST, layer="never")
         .describe()
         .endswith(f"no runtime layer, config {never.runtime.config.digest()})")
     )
@@ -96,8 +96,8 @@ def test_what_cannot_be_built_is_refused_in_one_line():
         assert "\n" not in str(err.value)
     with pytest.raises(PolicyLoadError, match="flies without a runtime layer"):
         _ = build("controller:zemzev").runtime
-    with pytest.raises(ValueError, match="shield must be one of"):
-        build(ROBUST, shield="maybe")
+    with pytest.raises(ValueError, match="layer must be one of"):
+        build(ROBUST, layer="maybe")
 
 
 def test_a_path_is_a_file_never_a_spec(tmp_path):
@@ -109,7 +109,7 @@ def test_an_mpc_teacher_flown_twice_decides_its_first_step_alike():
     """`Runtime.begin_episode` starts the teacher afresh: without it, the second flight's first
     state would continue the first flight's plan (a hovering lander is where its plan said it
     would be) and be answered by a warm re-plan, not the first decision."""
-    rt = build("shield:controller:mpc-fuel").runtime
+    rt = build("layer:controller:mpc-fuel").runtime
     teacher = rt.actor
     assert isinstance(teacher, MPCController)
     rt.begin_episode()
@@ -123,7 +123,7 @@ def test_an_mpc_teacher_flown_twice_decides_its_first_step_alike():
 
 
 def test_begin_episodes_starts_every_row_of_a_batch_afresh():
-    rt = build("shield:controller:mpc-fuel").runtime
+    rt = build("layer:controller:mpc-fuel").runtime
     states = np.stack([HOVER, HOVER + [5.0, 0, 40.0, 0, 0, 0, 0]])
     rt.begin_episodes(2)
     first, decisions = rt.step_rows(states, np.arange(2))
@@ -138,8 +138,8 @@ def test_bare_action_leaves_the_next_decision_unchanged(name: str):
     """An MPC teacher's own action on the state it is about to be asked about (what
     `bare_action` answered by re-planning in place, before) changes none of its plans: the
     flight decides step for step as a twin's that is never asked."""
-    rt = build(f"shield:controller:{name}").runtime
-    twin = build(f"shield:controller:{name}").runtime
+    rt = build(f"layer:controller:{name}").runtime
+    twin = build(f"layer:controller:{name}").runtime
     env = PoweredDescentEnv(disturbance=True)
     _, info = env.reset(seed=3, options={"initial_state": HOVER})
     rt.begin_episode()

@@ -18,7 +18,7 @@ import numpy as np
 from pd_core.runtime.build import build
 
 rt = build({str(ROBUST)!r}).runtime
-law = build("controller:zemzev-vernier", layer=True).runtime
+law = build("controller:zemzev-vernier", as_runtime=True).runtime
 
 class Poisoned(types.ModuleType):
     def __getattr__(self, name):

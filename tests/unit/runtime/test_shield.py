@@ -44,7 +44,7 @@ ROBUST = str(Path(__file__).resolve().parents[3] / "models" / "pd_dqn_robust.pt"
 FALLBACK = ZemZevController(VERNIER_PARAMS)
 
 
-def shield_actions(acts, states, space, p, scale=None):
+def ruled_actions(acts, states, space, p, scale=None):
     """(actions flown, mask of the steps a rule changed) of `apply_rules`."""
     out, source = apply_rules(np.asarray(acts), states, space, p, FALLBACK, scale)
     return out, source != NETWORK
@@ -64,7 +64,7 @@ def test_limit_is_the_margin_braking_law():
     np.testing.assert_allclose(heavy, [0.5])
 
 
-def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
+def test_the_layer_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
     rng = np.random.default_rng(0)
     n = 400
     s = np.zeros((n, 7))
@@ -75,7 +75,7 @@ def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
     s[:, 6] = rng.uniform(1700, 2200, n)
     acts = rng.integers(0, DEFAULT_ACTIONS.n, n)
     limit_only = dataclasses.replace(BRAKE_ONLY, touchdown_speed_mps=0.0)
-    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, limit_only)
+    out, fired = ruled_actions(acts, s, DEFAULT_ACTIONS, limit_only)
     # one step ahead under the commanded vertical thrust, counted at the margin
     az = 0.9 * DEFAULT_ACTIONS.thrust(acts)[:, 2] / s[:, 6] - G
     z1 = s[:, 2] + s[:, 5] * DT_S + 0.5 * az * DT_S**2
@@ -93,20 +93,20 @@ def test_shield_sets_full_vertical_thrust_only_where_the_limit_is_exceeded():
 
 
 @pytest.mark.parametrize("thrust_factor", [1.0, 0.9])
-def test_a_policy_that_never_brakes_touches_down_softly_behind_the_shield(thrust_factor):
+def test_a_policy_that_never_brakes_touches_down_softly_behind_the_layer(thrust_factor):
     """Free fall from 2 km at 90 m/s; the engines deliver `thrust_factor` of the command (0.9:
-    exactly the shield's margin). Without the shield it hits the ground at > 100 m/s."""
+    exactly the layer's margin). Without the layer it hits the ground at > 100 m/s."""
     free_fall = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 0]))  # zero thrust
     touchdown = {}
-    for shielded in (True, False):
+    for behind in (True, False):
         s = np.array([0.0, 0.0, 2000.0, 0.0, 0.0, -90.0, 2100.0])
         while s[2] > 0.0:
             a = np.array([free_fall])
-            if shielded:
-                a, _ = shield_actions(a, s[None], DEFAULT_ACTIONS, P)
+            if behind:
+                a, _ = ruled_actions(a, s[None], DEFAULT_ACTIONS, P)
             thrust = thrust_factor * DEFAULT_ACTIONS.thrust(a)[0]
             s = step(s, thrust, np.zeros(3), DT_S)
-        touchdown[shielded] = -s[5]
+        touchdown[behind] = -s[5]
     assert touchdown[False] > 100.0
     # one 0.2 s step of free fall (0.74 m/s) above the 0.5 m/s the limit brakes to
     assert touchdown[True] < 0.5 + G * DT_S + 0.1
@@ -118,13 +118,13 @@ def test_the_guard_raises_free_fall_one_level_only_low_and_descending():
     s = np.tile([0.0, 0.0, 2.0, 0.0, 0.0, -0.3, 1600.0], (6, 1))
     s[2, 2] = 11.0  # above the 10 m guard altitude
     s[3, 5] = 0.2  # climbing
-    out, fired = shield_actions(acts, s, DEFAULT_ACTIONS, P)
+    out, fired = ruled_actions(acts, s, DEFAULT_ACTIONS, P)
     np.testing.assert_array_equal(fired, [True, True, False, False, False, False])
     np.testing.assert_array_equal(fired, guard_mask(s, levels[:, 2], P, 6500.0))
     after = DEFAULT_ACTIONS.level_table[out]
     np.testing.assert_array_equal(after[:, 0:2], levels[:, 0:2])  # horizontal untouched
     np.testing.assert_array_equal(after[:, 2], [1, 1, 0, 0, 1, 2])
-    assert not shield_actions(acts, s, DEFAULT_ACTIONS, BRAKE_ONLY)[1].any()
+    assert not ruled_actions(acts, s, DEFAULT_ACTIONS, BRAKE_ONLY)[1].any()
 
 
 def test_a_step_that_ends_on_the_ground_is_judged_by_its_touchdown_speed():
@@ -149,12 +149,12 @@ def test_the_braking_limit_counts_on_the_measured_thrust_where_it_is_short():
     free_fall = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, 0]))
     a = np.array([free_fall])
     fired = [
-        shield_actions(a, s, DEFAULT_ACTIONS, P, scale)[1][0]
+        ruled_actions(a, s, DEFAULT_ACTIONS, P, scale)[1][0]
         for scale in (None, np.array([1.0]), np.array([1.1]), np.array([0.85]))
     ]
     assert fired == [False, False, False, True]
     off = dataclasses.replace(P, measured_thrust=False)
-    assert not shield_actions(a, s, DEFAULT_ACTIONS, off, np.array([0.85]))[1][0]
+    assert not ruled_actions(a, s, DEFAULT_ACTIONS, off, np.array([0.85]))[1][0]
     with pytest.raises(ValueError, match="measured_thrust must be true or false"):
         RuntimeConfig().with_settings("measured_thrust=0.5")
 
@@ -174,12 +174,12 @@ def test_the_shipped_policy_lands_a_15_percent_shortfall_by_the_measured_thrust(
 def test_light_landers_in_gusts_touch_down_instead_of_bouncing():
     """1500-1700 kg with 4x gusts: judged one step below the pad, the limit kept bouncing light
     landers back up from the last decimetres until gusts carried them off the pad (ZEM/ZEV-vernier
-    behind the shield: 94.5 % of 200 episodes at a seed no report uses; 100 % judged by the
+    behind the layer: 94.5 % of 200 episodes at a seed no report uses; 100 % judged by the
     touchdown speed)."""
     d = Dispersions("light-gusts", mass_kg=(1500.0, 1700.0), disturbance_scale=4.0)
     rates = []
     for td in (P.touchdown_speed_mps, 0.0):
-        actor = build(f"set:touchdown_speed_mps={td}:shield:controller:zemzev-vernier").actor
+        actor = build(f"set:touchdown_speed_mps={td}:layer:controller:zemzev-vernier").actor
         rates.append(rollout(actor, 200, 9_700_000, dispersions=d).landed.mean())
     assert rates[0] >= 0.995 and rates[1] <= 0.97, rates
 
@@ -194,12 +194,12 @@ def test_the_guard_lets_a_light_lander_sink_slowly_and_no_faster():
     s[2:, 6] = 1700.0
     s[3, 5] = -0.8
     guard_only = dataclasses.replace(P, handover_mass_kg=0.0)  # 1250 kg: else the teacher flies
-    _, fired = shield_actions(free_fall, s, DEFAULT_ACTIONS, guard_only)
+    _, fired = ruled_actions(free_fall, s, DEFAULT_ACTIONS, guard_only)
     np.testing.assert_array_equal(fired, [False, True, True, True])
 
 
 def test_a_light_lander_under_navigation_noise_lands_instead_of_hovering():
-    """1600-1800 kg with 3 m / 0.3 m/s of navigation noise: ZEM/ZEV-vernier behind the shield
+    """1600-1800 kg with 3 m / 0.3 m/s of navigation noise: ZEM/ZEV-vernier behind the layer
     hovered above the pad until timeout in 15 % of episodes (seed 81000000) with the strict guard;
     40 episodes of a seed no report uses all land."""
     d = Dispersions(
@@ -209,7 +209,7 @@ def test_a_light_lander_under_navigation_noise_lands_instead_of_hovering():
         nav_velocity_sigma_mps=0.3,
         nav_mass_sigma_kg=30.0,
     )
-    actor = build("shield:controller:zemzev-vernier").actor
+    actor = build("layer:controller:zemzev-vernier").actor
     ro = rollout(actor, 40, 9_600_000, dispersions=d)
     assert ro.landed.mean() >= 0.975
 
@@ -228,7 +228,7 @@ def test_the_guard_keeps_a_delayed_bang_bang_hover_soft():
             seen = s + np.array([0, 0, 1.0 + rng.normal(0, 0.3), 0, 0, 0, 0])
             level = 0 if seen[2] > 1.2 else 2  # bang-bang around 1.2 m observed
             a = DEFAULT_ACTIONS.levels_to_action(np.array([3, 3, level]))
-            a = shield_actions(np.array([a]), seen[None], DEFAULT_ACTIONS, p)[0][0]
+            a = ruled_actions(np.array([a]), seen[None], DEFAULT_ACTIONS, p)[0][0]
             s = step(s, DEFAULT_ACTIONS.thrust(in_flight), np.zeros(3), DT_S)
             in_flight = a
             if s[2] < 0.0:
@@ -242,7 +242,7 @@ def test_handover_gives_the_teacher_only_lateral_limited_states_above_5_m():
     """A lander 1.8 km off sideways and still moving away needs 45 s of full lateral thrust
     to stop on the pad; the 2.5 m/s^2 profile leaves it 15 s from 300 m, so the teacher slows
     the descent and flies it. A Table 3 state, the same state below 5 m, or a handover altitude
-    of 0 keep the policy's action (the shield's own limits still apply)."""
+    of 0 keep the policy's action (the layer's own limits still apply)."""
     s = np.array(
         [
             [0.0, -1800.0, 300.0, 0.0, -40.0, -40.0, 1800.0],  # corner, drifting away
@@ -256,9 +256,9 @@ def test_handover_gives_the_teacher_only_lateral_limited_states_above_5_m():
     no_alt = dataclasses.replace(P, handover_altitude_m=0)
     assert not handover_mask(s, RL_THRUST.max_n, no_alt, FALLBACK).any()
     keep = DEFAULT_ACTIONS.levels_to_action(np.array([[3, 3, 2]] * 3))  # no lateral thrust
-    out, overridden = shield_actions(keep, s, DEFAULT_ACTIONS, P)
+    out, overridden = ruled_actions(keep, s, DEFAULT_ACTIONS, P)
     teacher = make_controller("zemzev-vernier").act_batch(s[:1])
-    want = shield_actions(teacher, s[:1], DEFAULT_ACTIONS, BRAKE_ONLY)[0]
+    want = ruled_actions(teacher, s[:1], DEFAULT_ACTIONS, BRAKE_ONLY)[0]
     assert out[0] == want[0] and overridden[0]
     assert DEFAULT_ACTIONS.level_table[out[0], 1] == 6  # full +y thrust, back towards the pad
     np.testing.assert_array_equal(out[1:], keep[1:])
@@ -273,9 +273,9 @@ def test_the_teacher_flies_landers_lighter_than_the_student_learned():
     off = dataclasses.replace(P, handover_mass_kg=0.0)
     np.testing.assert_array_equal(handover_mask(s, RL_THRUST.max_n, off, FALLBACK), [False, False])
     keep = DEFAULT_ACTIONS.levels_to_action(np.array([[0, 3, 2]] * 2))
-    out, overridden = shield_actions(keep, s, DEFAULT_ACTIONS, P)
+    out, overridden = ruled_actions(keep, s, DEFAULT_ACTIONS, P)
     teacher = make_controller("zemzev-vernier").act_batch(s[:1])
-    assert overridden[0] and out[0] == shield_actions(teacher, s[:1], DEFAULT_ACTIONS, off)[0][0]
+    assert overridden[0] and out[0] == ruled_actions(teacher, s[:1], DEFAULT_ACTIONS, off)[0][0]
     assert out[1] == keep[1]
 
 
@@ -310,33 +310,33 @@ def files(tmp_path):
     net = QNetwork(7, 147, (16, 16), "tanh")
     bare = save_policy(tmp_path / "bare", net, RuntimeConfig.off())
     margin = RuntimeConfig(rules=RulesConfig(thrust_margin=0.8))
-    shielded = save_policy(tmp_path / "sh", net, margin)
-    return bare, shielded
+    layered = save_policy(tmp_path / "sh", net, margin)
+    return bare, layered
 
 
 def test_policy_files_fly_behind_the_runtime_config_they_pin(files):
-    bare, shielded = files
+    bare, layered = files
     assert load_policy(bare).config == RuntimeConfig.off()
-    assert load_policy(shielded).config.rules == RulesConfig(thrust_margin=0.8)
-    assert load_policy(shielded, shield="never").config.is_off
-    assert load_policy(bare, shield="always").config == RuntimeConfig()
+    assert load_policy(layered).config.rules == RulesConfig(thrust_margin=0.8)
+    assert load_policy(layered, layer="never").config.is_off
+    assert load_policy(bare, layer="always").config == RuntimeConfig()
     falling = np.array([0.0, 0.0, 500.0, 0.0, 0.0, -90.0, 2000.0])
-    p = load_policy(shielded)
+    p = load_policy(layered)
     p.begin_episode()
     a, decision = p.step(falling)
     assert DEFAULT_ACTIONS.level_table[a, 2] == 2 and decision.action == a
     # the bare network (no layer) would not have braked: the layer decided, and says so
     assert p.bare_action(falling) == decision.proposed != a
     assert decision.source == "brake" and p.counts["brake"] == 1 and p.changed == 1
-    assert build(f"bare:{shielded}").actor.config.is_off
-    assert build(f"shield:{bare}").actor.config == RuntimeConfig()
-    with pytest.raises(ValueError, match="shield must be one of file, always, never"):
-        load_policy(bare, shield="maybe")
+    assert build(f"bare:{layered}").actor.config.is_off
+    assert build(f"layer:{bare}").actor.config == RuntimeConfig()
+    with pytest.raises(ValueError, match="layer must be one of file, always, never"):
+        load_policy(bare, layer="maybe")
 
 
 def test_bad_runtime_config_is_refused_in_one_line(files):
-    _, shielded = files
-    js = shielded.with_suffix(".json")
+    _, layered = files
+    js = layered.with_suffix(".json")
     meta = json.loads(js.read_text())
     good = meta["runtime"]
     for part, key, value, says in (
@@ -357,33 +357,34 @@ def test_bad_runtime_config_is_refused_in_one_line(files):
         meta["runtime"] = bad
         js.write_text(json.dumps(meta))
         with pytest.raises(PolicyLoadError, match=says) as err:
-            load_policy(shielded)
+            load_policy(layered)
         assert "\n" not in str(err.value) and "bad runtime config" in str(err.value)
 
 
 def test_a_format1_file_is_refused_in_one_line_and_migrated_with_its_values_written_out(files):
     """A file from before the config was pinned names the migration; the migration writes the
-    config the code of the day flew, the file's own shield settings over the defaults."""
+    config the code of the day flew, the file's own settings (format 1's "shield") over the
+    defaults."""
     from pd_core.runtime.migrate import main as migrate
 
-    _, shielded = files
-    js = shielded.with_suffix(".json")
+    _, layered = files
+    js = layered.with_suffix(".json")
     meta = json.loads(js.read_text())
     del meta["runtime"]
     meta.update(format_version=1, shield={"thrust_margin": 0.8, "nav_filter": 0.0})
     js.write_text(json.dumps(meta))
     with pytest.raises(PolicyLoadError, match="format 1 .* pd_core.runtime.migrate") as err:
-        load_policy(shielded)
+        load_policy(layered)
     assert "\n" not in str(err.value)
     assert migrate([str(js)]) == 0
     written = json.loads(js.read_text())["runtime"]
     assert written["rules"]["thrust_margin"] == 0.8 and written["nav_filter"]["enabled"] is False
     assert written["latency"] == dataclasses.asdict(RuntimeConfig().latency)
-    assert load_policy(shielded).config.rules.thrust_margin == 0.8
+    assert load_policy(layered).config.rules.thrust_margin == 0.8
 
 
 def test_a_reference_controller_flies_behind_the_same_layer():
-    """shield:controller:zemzev: ZEM/ZEV's own actions, changed exactly where the rules say, and
+    """layer:controller:zemzev: ZEM/ZEV's own actions, changed exactly where the rules say, and
     counted by who decided (the like-for-like comparison of the model report)."""
     rng = np.random.default_rng(5)
     s = np.zeros((300, 7))
@@ -397,8 +398,8 @@ def test_a_reference_controller_flies_behind_the_same_layer():
         latency=RuntimeConfig.off().latency, nav_filter=RuntimeConfig.off().nav_filter
     )
     actor = Runtime(zz, off)
-    assert build("shield:controller:zemzev").label == "controller zemzev + shield"
-    want, changed = shield_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
+    assert build("layer:controller:zemzev").label == "controller zemzev + layer"
+    want, changed = ruled_actions(zz.act_batch(s), s, DEFAULT_ACTIONS, P)
     actor.begin_episodes(len(s))
     got, decisions = actor.step_rows(s, np.arange(len(s)))
     np.testing.assert_array_equal(got, want)
@@ -417,7 +418,7 @@ def test_a_set_spec_flies_an_agent_with_runtime_settings_changed():
     assert not actor.config.nav_filter.enabled and actor.config.rules.touchdown_speed_mps == 0.0
     assert actor.latency.nav is None and actor.latency.max_delay_steps == 8
     assert label == "pd_dqn_robust (nav_filter=0,touchdown_speed_mps=0)"
-    ctrl = build("set:max_delay_steps=0,nav_filter=0:shield:controller:zemzev").actor
+    ctrl = build("set:max_delay_steps=0,nav_filter=0:layer:controller:zemzev").actor
     assert ctrl.latency is None and ctrl.config.rules.guard_altitude_m == P.guard_altitude_m
     for spec, says in (
         ("set:nav_filter=0:controller:zemzev", "no runtime layer"),

@@ -120,7 +120,7 @@ def test_vernier_tracks_a_capped_speed_towards_the_pad_only_below_its_altitude()
 
 def test_vernier_lands_nearer_the_pad_than_zemzev():
     """ZEM/ZEV's t_go floor (3 s) outlasts the last metres: it overshoots the pad (1.28 m median
-    behind the shield, seed 0); the vernier lands within 0.42 m, as often and as softly."""
+    behind the layer, seed 0); the vernier lands within 0.42 m, as often and as softly."""
     out = {}
     for name, params in (("zemzev", ZemZevParams()), ("vernier", VERNIER_PARAMS)):
         ro = rollout(Runtime(ZemZevController(params), RuntimeConfig()), 300, seed=0)
