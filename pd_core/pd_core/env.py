@@ -11,8 +11,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pd_core.actions import DEFAULT_ACTIONS, ActionSpace
-from pd_core.config import DT_S, MAX_EPISODE_TIME_S, REWARD, TABLE3, RewardConfig, StateRange
 from pd_core.lander import Lander
 
 # Scaled states of anything `check_state` accepts lie well inside +-1e4.
@@ -25,17 +23,10 @@ class PoweredDescentEnv(Lander, gym.Env):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
-    def __init__(
-        self,
-        disturbance: bool = True,
-        max_time_s: float = MAX_EPISODE_TIME_S,
-        initial_range: StateRange = TABLE3,
-        actions: ActionSpace = DEFAULT_ACTIONS,
-        reward_cfg: RewardConfig = REWARD,
-        dt_s: float = DT_S,
-    ) -> None:
-        Lander.__init__(self, disturbance, max_time_s, initial_range, actions, reward_cfg, dt_s)
-        self.action_space = spaces.Discrete(actions.n)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As `Lander(...)`; adds the Gymnasium spaces."""
+        Lander.__init__(self, *args, **kwargs)
+        self.action_space = spaces.Discrete(self.actions.n)
         self.observation_space = OBSERVATION_SPACE
 
     def reset(

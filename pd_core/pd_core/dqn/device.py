@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from pd_core.dqn.agent import DQNAgent
-from pd_core.dqn.minibatch import DEMO, REPLAY, minibatch_plan
+from pd_core.dqn.minibatch import DEMO, REPLAY, plan_of
 from pd_core.dqn.replay import ReplayMemory
 
 WARMUP_STEPS = 3
@@ -196,13 +196,7 @@ class DeviceUpdate:
         if plan is not None:
             return plan
         cfg = self.agent.cfg
-        rows = minibatch_plan(
-            cfg.batch_agent,
-            cfg.batch_demo,
-            cfg.margin,
-            has_demo=self.demo is not None,
-            pretraining=pretraining,
-        )
+        rows = plan_of(cfg, has_demo=self.demo is not None, pretraining=pretraining)
         if not pretraining:
             self._plans.pop(True, None)  # pre-training is over: free its graph
         memories = {REPLAY: self.replay, DEMO: self.demo}

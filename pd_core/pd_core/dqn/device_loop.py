@@ -53,7 +53,7 @@ from pd_core.dqn.config import TrainConfig, check_config, preset
 from pd_core.dqn.demo_file import demo_memory_for
 from pd_core.dqn.device import describe_device, resolve_device
 from pd_core.dqn.device_checkpoint import loop_state, read_loop_checkpoint, restore
-from pd_core.dqn.minibatch import DEMO, REPLAY, MinibatchPlan, minibatch_plan
+from pd_core.dqn.minibatch import DEMO, REPLAY, MinibatchPlan, plan_of
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import ReplayMemory
 from pd_core.dqn.run_log import RunLogs, run_folder
@@ -314,10 +314,7 @@ class DeviceLoop:
 
     @staticmethod
     def _plan(agent: AgentState) -> MinibatchPlan:
-        cfg = agent.cfg
-        return minibatch_plan(
-            cfg.batch_agent, cfg.batch_demo, cfg.margin, has_demo=agent.demo_size > 0
-        )
+        return plan_of(agent.cfg, has_demo=agent.demo_size > 0)
 
     def _init_buffers(self) -> None:
         a, k, b, dev = len(self.agents), self.k, self.batch, self.device

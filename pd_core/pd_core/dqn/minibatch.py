@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from pd_core.dqn.config import TrainConfig
+
 REPLAY = "replay"
 DEMO = "demo"
 
@@ -48,3 +50,10 @@ def minibatch_plan(
     else:
         parts, demo_from = ((REPLAY, batch_agent),), None
     return MinibatchPlan(parts, demo_from if margin > 0.0 else None)
+
+
+def plan_of(cfg: TrainConfig, *, has_demo: bool, pretraining: bool = False) -> MinibatchPlan:
+    """`minibatch_plan` of a training config's sizes and margin."""
+    return minibatch_plan(
+        cfg.batch_agent, cfg.batch_demo, cfg.margin, has_demo=has_demo, pretraining=pretraining
+    )

@@ -35,7 +35,7 @@ from pd_core.dqn.demo_file import DEMO_FILE, demo_memory_for, write_demo_file
 from pd_core.dqn.demo_memory import label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
 from pd_core.dqn.loop import TrainingLoop
-from pd_core.dqn.minibatch import DEMO, REPLAY, minibatch_plan
+from pd_core.dqn.minibatch import DEMO, REPLAY, plan_of
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
 from pd_core.dqn.run_log import CsvLog, run_folder
@@ -364,13 +364,7 @@ class Trainer(TrainingLoop):
     def sample(self, pretraining: bool = False) -> ReplaySample:
         """One update's minibatch, drawn from the memories in the order of `minibatch_plan`."""
         cfg = self.cfg
-        plan = minibatch_plan(
-            cfg.batch_agent,
-            cfg.batch_demo,
-            cfg.margin,
-            has_demo=self.demo is not None,
-            pretraining=pretraining,
-        )
+        plan = plan_of(cfg, has_demo=self.demo is not None, pretraining=pretraining)
         memories = {REPLAY: self.replay, DEMO: self.demo}
         out: ReplaySample | None = None
         for memory, rows in plan.parts:
