@@ -34,6 +34,7 @@ from rclpy.node import Node
 from pd_bringup.bag import BagError, message_class, read_bag, replay_qos
 from pd_ros_common import names
 from pd_ros_common.cli import UsageError, split_ros_args
+from pd_ros_common.publishing import PublishTimeout, publish_acked
 
 WAIT_TIMEOUT_S = 30.0
 
@@ -178,13 +179,16 @@ def main(argv: list[str] | None = None) -> int:
             delay = t0_wall + (stamp - t0_bag) * 1e-9 / args.rate - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            pubs[topic].publish(bytes(raw))
+            publish_acked(pubs[topic], bytes(raw))
             sent += 1
         for p in pubs.values():
             p.wait_for_all_acked(Duration(seconds=5))
         print(f"pd_replay: published {sent} messages from {args.bag}", flush=True)
     except (KeyboardInterrupt, ExternalShutdownException):
         print(f"pd_replay: interrupted after {sent} messages", flush=True)
+    except PublishTimeout as exc:
+        print(f"pd_replay: stopped after {sent} messages: {exc}", file=sys.stderr)
+        return 1
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -30,6 +30,7 @@ from pd_interfaces.msg import EpisodeResult, LanderState, ThrustCommand
 from pd_interfaces.srv import ResetEpisode
 from pd_ros_common import qos
 from pd_ros_common.convert import reset_request, vec3
+from pd_ros_common.publishing import publish_acked
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 
@@ -232,7 +233,7 @@ def test_bursts_counted_in_full(stack, make_node, spin_until):
     for i in range(2000):
         msg = ThrustCommand(episode=10**6, step=i, action=500)  # unknown action: rejected
         msg.thrust = vec3([0.0, 0.0, 0.0])
-        cmd_pub.publish(msg)
+        publish_acked(cmd_pub, msg)  # a writer whose history is full waits for acks
     assert wait_for(lambda: _rejected_total(sim.log()) >= before + 2000, 60.0), sim.log()[-2000:]
 
     fresh = stack["procs"].node(
@@ -250,7 +251,7 @@ def test_bursts_counted_in_full(stack, make_node, spin_until):
     for k in range(300):
         s = LanderState(episode=1, step=k, mass=1900.0, status=LanderState.FLYING)
         s.position, s.velocity = vec3([100.0, 50.0, 1500.0]), vec3([-5.0, 1.0, -40.0])
-        state_pub.publish(s)
+        publish_acked(state_pub, s)
 
     def every_state_answered_once() -> bool:
         return sorted(c.step for c in answers) == list(range(300))
