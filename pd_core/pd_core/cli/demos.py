@@ -51,9 +51,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pd-demos: {why}", file=sys.stderr)
         return 2
     # torch and the teachers load only once the flags are known to be good
+    from pd_core.dqn.config import training_reward
     from pd_core.dqn.demo_file import read_provenance, write_demo_file
     from pd_core.dqn.demo_memory import build_demo_memory
-    from pd_core.dqn.train import training_reward
 
     t0 = time.perf_counter()
     try:

@@ -65,8 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     show_as_lines("pd-train")  # an old flag (--shield) is one line on stderr
     # torch loads in seconds: only once the flags are known to be good (`--help` stays instant)
+    from pd_core.dqn.demo_file import prepare_demonstrations
     from pd_core.dqn.device_checkpoint import is_loop_checkpoint
     from pd_core.dqn.device_loop import DeviceLoop, uses_device_loop
+    from pd_core.dqn.run_log import run_folder
     from pd_core.dqn.train import Trainer
 
     if args.resume:
@@ -96,8 +98,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if uses_device_loop(cfg):
             return run_device_loop(cfg, args)
-        try:
-            trainer = Trainer(cfg)
+        try:  # data first: the demonstrations, written into the run folder, then the trainer
+            run_dir = run_folder(cfg)
+            demos = prepare_demonstrations(cfg, run_dir)
+            trainer = Trainer(cfg, run_dir, demos=demos)
         except (FileNotFoundError, ValueError) as exc:
             print(f"pd-train: {exc}", file=sys.stderr)
             return 2

@@ -10,6 +10,10 @@ a teacher, after checking that the file was made for this config: a field or a f
 is refused in one line. The memory read back is the memory built, transition for transition, so
 training on it is training on a fresh build, to the bit.
 
+`prepare_demonstrations(cfg, run_dir)` is that first step for a run: it reads `cfg.demo_memory`,
+or builds the memory and writes it into the run folder, before a `Trainer` exists (`train`,
+`pd-train` and the sweeps call it, then hand the result to the trainer).
+
 DAgger rounds after the first label the network being trained, so they are built during
 training (`Trainer.dagger_round_labels`), not here.
 """
@@ -18,14 +22,15 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from pd_core import __version__
 from pd_core.config import RewardConfig
-from pd_core.dqn.config import TrainConfig
+from pd_core.dqn.config import TrainConfig, training_reward
 from pd_core.dqn.demo_memory import build_demo_memory
 from pd_core.dqn.replay import DemoMemory
 
@@ -140,3 +145,24 @@ def demo_memory_for(
     if cfg.demo_memory:
         return read_demo_file(Path(cfg.demo_memory), cfg)
     return build_demo_memory(cfg, reward_cfg)
+
+
+class Demonstrations(NamedTuple):
+    """What a run trains on before it interacts: the memory (None: no demonstrations), the
+    build's report, the file it is in and the seconds it took to read or build."""
+
+    memory: DemoMemory | None
+    info: dict[str, Any]
+    path: Path | None
+    seconds: float
+
+
+def prepare_demonstrations(cfg: TrainConfig, run_dir: Path) -> Demonstrations:
+    """Data first: the memory of `cfg.demo_memory`, or one built for `cfg` and written, with its
+    provenance, to `run_dir`/`DEMO_FILE` (`pd-train --demo-memory` trains on it again)."""
+    t0 = time.perf_counter()
+    memory, info = demo_memory_for(cfg, training_reward(cfg))
+    path: Path | None = Path(cfg.demo_memory) if cfg.demo_memory else None
+    if memory is not None and path is None:
+        path = write_demo_file(Path(run_dir) / DEMO_FILE, memory, cfg, info)
+    return Demonstrations(memory, info, path, time.perf_counter() - t0)

@@ -49,8 +49,8 @@ from tqdm import tqdm
 
 from pd_core.dqn.agent import epsilon_at
 from pd_core.dqn.checkpoint import write_checkpoint
-from pd_core.dqn.config import TrainConfig, check_config, preset
-from pd_core.dqn.demo_file import demo_memory_for
+from pd_core.dqn.config import TrainConfig, check_config, preset, training_reward
+from pd_core.dqn.demo_file import prepare_demonstrations
 from pd_core.dqn.device import describe_device, resolve_device
 from pd_core.dqn.device_checkpoint import loop_state, read_loop_checkpoint, restore
 from pd_core.dqn.minibatch import DEMO, REPLAY, MinibatchPlan, plan_of
@@ -62,7 +62,6 @@ from pd_core.dqn.train import (
     greedy_evaluation,
     policy_metadata,
     runtime_config_for,
-    training_reward,
 )
 from pd_core.plots import training_curves
 from pd_core.runtime.policy_file import code_version, save_policy
@@ -241,10 +240,10 @@ class DeviceLoop:
         for i, cfg in enumerate(cfgs):
             torch.manual_seed(cfg.seed)  # the reference loop's first draw: the same weights
             nets.append(QNetwork(7, 147, tuple(cfg.hidden)))
-            demo, info = demo_memory_for(cfg, training_reward(cfg))
-            demos.append(demo)
             run_dir = Path(run_dirs[i]) if run_dirs else run_folder(cfg)
             run_dir.mkdir(parents=True, exist_ok=True)
+            demo, info, _, _ = prepare_demonstrations(cfg, run_dir)  # data first
+            demos.append(demo)
             env = make_vector_env(
                 cfg.num_envs, reward_cfg=training_reward(cfg), dispersions=cfg.dispersions
             )

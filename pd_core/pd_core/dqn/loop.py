@@ -1,15 +1,22 @@
-"""The run loop of `pd_core.dqn.train.Trainer`: pre-training on demonstrations, interaction,
-periodic evaluation, checkpoints, logs and curves, until a stop criterion.
+"""The run loop of a `pd_core.dqn.train.Trainer`: pre-training on demonstrations (with DAgger
+rounds), interaction, periodic evaluation and checkpoints, until a stop criterion.
 
-`TrainingLoop` is a base class of `Trainer` and uses the state `Trainer.__init__` builds (config,
-agent, envs, memories, counters, logs); it holds no state of its own.
+`TrainingLoop(trainer, callbacks).run()` changes only the trainer's state (its agent, memories,
+counters and checkpoints); what a run reports goes through `Callback`s, called in their order
+at fixed points of the loop: `on_start`, `on_pretrain` (every `PRETRAIN_LOG_EVERY` pre-training
+updates), `on_dagger_round`, `on_episode` (each finished training episode), `on_metrics`
+(every `METRICS_PERIOD_S`), `on_eval` (each periodic evaluation) and `on_end`. The run folder's
+CSV logs (`RunFiles`), the progress bar (`ProgressBar`), curves.png (`CurvesPlot`) and a
+sweep's reports (`EvalReport`) are such callbacks; none of them draws a random number, so the
+callbacks of a run do not change what it trains.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -24,263 +31,366 @@ METRICS_PERIOD_S = 10.0
 """metrics.csv rows, log flushes and progress-bar updates this often"""
 PRETRAIN_LOG_EVERY = 1000
 """pre-training updates between metrics rows (and eval/checkpoint checks)"""
+LOSS_KEYS = ("loss", "td_loss", "margin_loss", "q_mean")
+
+
+class Episode(NamedTuple):
+    """A finished training episode, as episodes.csv has it."""
+
+    episode: int
+    wall_s: float
+    env_steps: int
+    updates: int
+    ret: float
+    landed: int
+    fuel_kg: float
+    k_velocity_mps: float
+    epsilon: float
+
+
+class Callback:
+    """One reporter of a training run; every hook does nothing unless overridden. `run` is the
+    `Trainer` (read it, do not change it)."""
+
+    def on_start(self, run: Any) -> None: ...
+
+    def on_pretrain(self, run: Any, wall_s: float) -> None: ...
+
+    def on_dagger_round(self, run: Any, info: dict[str, Any]) -> None: ...
+
+    def on_episode(self, run: Any, episode: Episode) -> None: ...
+
+    def on_metrics(self, run: Any, wall_s: float, epsilon: float) -> None: ...
+
+    def on_eval(self, run: Any, ev: dict[str, float], wall_s: float) -> None: ...
+
+    def on_end(self, run: Any, summary: dict[str, Any]) -> None: ...
+
+
+def loss_row(info: dict[str, Any]) -> list[float]:
+    """The loss parts of an update's info (device tensors are read back here only)."""
+    return [float(info.get(k, float("nan"))) for k in LOSS_KEYS]
+
+
+class RunFiles(Callback):
+    """episodes.csv, metrics.csv, evals.csv and scenarios.csv of the run folder
+    (`pd_core.dqn.run_log`)."""
+
+    def __init__(self) -> None:
+        self.logs: RunLogs | None = None
+        self.scenarios: CsvLog | None = None
+
+    def on_start(self, run: Any) -> None:
+        self.logs = RunLogs(run.run_dir)
+
+    def on_pretrain(self, run: Any, wall_s: float) -> None:
+        nan = float("nan")
+        assert self.logs is not None
+        row = (wall_s, 0, run.agent.updates, 0, 1.0, *loss_row(run.last_info), nan, nan)
+        self.logs.metrics.row(*row)
+        self.logs.metrics.flush()
+
+    def on_episode(self, run: Any, episode: Episode) -> None:
+        assert self.logs is not None
+        self.logs.episodes.row(*episode)
+
+    def on_metrics(self, run: Any, wall_s: float, epsilon: float) -> None:
+        assert self.logs is not None
+        ret, suc = recent_means(run)
+        c = run.c
+        row = (
+            wall_s,
+            c.env_steps,
+            run.agent.updates,
+            c.episodes,
+            epsilon,
+            *loss_row(run.last_info),
+        )
+        self.logs.metrics.row(*row, ret, suc)
+        self.logs.flush()
+        self._scenario_row(run, wall_s)
+
+    def on_eval(self, run: Any, ev: dict[str, float], wall_s: float) -> None:
+        assert self.logs is not None
+        self.logs.evals.row(wall_s, run.agent.updates, run.c.episodes, *ev.values())
+        self.logs.evals.flush()
+
+    def on_end(self, run: Any, summary: dict[str, Any]) -> None:
+        self._scenario_row(run, summary["wall_s"])
+        if self.logs is not None:
+            self.logs.close()
+        if self.scenarios is not None:
+            self.scenarios.close()
+
+    def _scenario_row(self, run: Any, wall_s: float) -> None:
+        """scenarios.csv: each scenario's draw probability and recent training failure rate."""
+        outcomes = run.outcomes
+        if outcomes is None:
+            return
+        if self.scenarios is None:
+            names = [d.name for d in run.env.scenarios]
+            head = ("wall_s", "episodes", *(f"p_{n}" for n in names), *(f"fail_{n}" for n in names))
+            self.scenarios = CsvLog(run.run_dir / "scenarios.csv", head)
+        self.scenarios.row(
+            wall_s, run.c.episodes, *map(float, outcomes.probs()),
+            *map(float, outcomes.failure_rates()),
+        )  # fmt: skip
+        self.scenarios.flush()
+
+
+def recent_means(run: Any) -> tuple[float, float]:
+    """(return, success) over the last 100 training episodes (nan before the first)."""
+    if not run.recent:
+        return float("nan"), float("nan")
+    return (
+        float(np.mean([x[0] for x in run.recent])),
+        float(np.mean([x[1] for x in run.recent])),
+    )
+
+
+class ProgressBar(Callback):
+    """A tqdm bar over episodes (pre-training updates for a DAgger run), and one line per DAgger
+    round (printed without a bar); nothing at all when `quiet`."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar: Any = None
+
+    def on_start(self, run: Any) -> None:
+        if not run.cfg.progress or self.quiet:
+            return
+        if run.cfg.dagger_rounds:  # no interaction: the bar counts the pre-training updates
+            total, done, unit = run.pretrain_total(), run.pretrained, "upd"
+        else:
+            total, done, unit = run.cfg.episodes, run.c.episodes, "ep"
+        self.bar = tqdm(total=total, initial=done, unit=unit, smoothing=0.05)
+
+    def on_pretrain(self, run: Any, wall_s: float) -> None:
+        if self.bar is None:
+            return
+        if run.cfg.dagger_rounds:
+            self.bar.update(PRETRAIN_LOG_EVERY)
+            self.bar.set_postfix_str(f"DAgger rounds {run.dagger_round}/{run.cfg.dagger_rounds}")
+        else:
+            self.bar.set_postfix_str(f"pretrain {run.pretrained}/{run.pretrain_total()}")
+
+    def on_dagger_round(self, run: Any, info: dict[str, Any]) -> None:
+        if self.quiet:
+            return
+        (self.bar.write if self.bar is not None else print)(
+            f"pd-train: DAgger round {info['round']}: {info['labels']} labels "
+            f"(agreement {info['agreement']:.1%}, student landed "
+            f"{info['student_success_rate']:.1%}), {len(run.demo)} demonstrations"
+        )
+
+    def on_episode(self, run: Any, episode: Episode) -> None:
+        if self.bar is not None:
+            self.bar.update(1)
+
+    def on_metrics(self, run: Any, wall_s: float, epsilon: float) -> None:
+        if self.bar is not None:
+            loss = float(run.last_info.get("loss", 0))
+            self.bar.set_postfix_str(
+                f"eps {epsilon:.3f} succ100 {recent_means(run)[1]:.2f} loss {loss:.3g}"
+                f" upd {run.agent.updates}"
+            )
+
+    def on_end(self, run: Any, summary: dict[str, Any]) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+class CurvesPlot(Callback):
+    """curves.png of the run folder at the end (`pd_core.plots.training_curves`)."""
+
+    def on_end(self, run: Any, summary: dict[str, Any]) -> None:
+        try:
+            training_curves(run.run_dir, run.run_dir / "curves.png")
+        except Exception as exc:  # noqa: BLE001 - plotting must never lose a trained model
+            print(f"pd-train: could not plot curves: {exc}")
+
+
+class EvalReport(Callback):
+    """Calls `report` with every periodic evaluation plus wall_s, updates and episodes (how a
+    sweep reports to Ray Tune)."""
+
+    def __init__(self, report: Callable[[dict[str, float]], None]) -> None:
+        self.report = report
+
+    def on_eval(self, run: Any, ev: dict[str, float], wall_s: float) -> None:
+        self.report(
+            {**ev, "wall_s": wall_s, "updates": run.agent.updates, "episodes": run.c.episodes}
+        )
 
 
 class TrainingLoop:
-    """`run` and its steps; see the module docstring."""
+    """`run` of a trainer; see the module docstring."""
+
+    def __init__(self, trainer: Any, callbacks: Sequence[Callback]) -> None:
+        self.t = trainer
+        self.callbacks = list(callbacks)
+        self._t0 = time.perf_counter() - trainer.c.wall_s
+
+    def emit(self, hook: str, *args: Any) -> None:
+        for cb in self.callbacks:
+            getattr(cb, hook)(self.t, *args)
 
     def run(self) -> dict[str, Any]:
         """Pre-train on demonstrations (DQfD), then interact until a stop criterion."""
-        cfg = self.cfg
-        (self.run_dir / "config.json").write_text(
+        t, cfg = self.t, self.t.cfg
+        (t.run_dir / "config.json").write_text(
             json.dumps(
-                {**cfg.to_dict(), "code_version": code_version(), "run": self.device_metadata()},
+                {**cfg.to_dict(), "code_version": code_version(), "run": t.device_metadata()},
                 indent=2,
             )
             + "\n"
         )
-        logs = RunLogs(self.run_dir)
-        bar = self._progress_bar()
-        self._t0 = time.perf_counter() - self.c.wall_s
-        self._pretrain(logs, bar)
-        if cfg.lr_finetune > 0 and self.pretrained >= cfg.pretrain_updates:
-            for group in self.agent.opt.param_groups:
-                group["lr"] = cfg.lr_finetune
-            if self._device_update is not None:
-                self._device_update.reset()  # a captured step keeps the lr it was captured with
-        last_log = self._now()
-        while not (stop_reason := self._stop_reason()):
-            eps = epsilon_at(self.c.episodes, cfg)
-            self._env_step(eps, logs, bar)
-            if len(self.replay) >= cfg.learning_starts:
-                self.c.update_credit += cfg.updates_per_step
+        self.emit("on_start")
+        self._t0 = time.perf_counter() - t.c.wall_s
+        self._pretrain()
+        if cfg.lr_finetune > 0 and t.pretrained >= cfg.pretrain_updates:
+            t.finetune_lr()
+        last_log = self.now()
+        while not (stop_reason := self.stop_reason()):
+            eps = epsilon_at(t.c.episodes, cfg)
+            self._env_step(eps)
+            if len(t.replay) >= cfg.learning_starts:
+                t.c.update_credit += cfg.updates_per_step
                 # the updates of a batched step run together after it (updates_per_step =
                 # num_envs: one per env transition); max_updates stops them on the exact count
-                while self.c.update_credit >= 1.0 and not self._updates_done():
-                    self.last_info = self.update()
-                    self.c.update_credit -= 1.0
-            t = self._now()
-            if t - last_log >= METRICS_PERIOD_S:
-                last_log = t
-                self._log_metrics(logs, bar, t, eps)
-            self._eval_and_checkpoint(logs, t)
-        self.c.wall_s = self._now()
-        if self.outcomes is not None:
-            self._log_scenarios(self.c.wall_s)
+                while t.c.update_credit >= 1.0 and not t.updates_done():
+                    t.last_info = t.update()
+                    t.c.update_credit -= 1.0
+            now = self.now()
+            if now - last_log >= METRICS_PERIOD_S:
+                last_log = now
+                t.c.wall_s = now
+                self.emit("on_metrics", now, eps)
+            self._eval_and_checkpoint(now)
+        t.c.wall_s = self.now()
         if self._unevaluated():
-            self._periodic_eval(logs)
-        final = self.save_policies("final")
-        self.checkpoint()
-        logs.close()
-        if self._scenario_log is not None:
-            self._scenario_log.close()
-        if bar is not None:
-            bar.close()
-        self._plot_curves()
-        return {
-            "run_dir": str(self.run_dir),
+            self._periodic_eval()
+        final = t.save_policies("final")
+        t.checkpoint()
+        summary = {
+            "run_dir": str(t.run_dir),
             "stop_reason": stop_reason,
-            "episodes": self.c.episodes,
-            "successes": self.c.successes,
-            "env_steps": self.c.env_steps,
-            "updates": self.agent.updates,
-            "wall_s": self.c.wall_s,
-            "device": describe_device(self.device),
+            "episodes": t.c.episodes,
+            "successes": t.c.successes,
+            "env_steps": t.c.env_steps,
+            "updates": t.agent.updates,
+            "wall_s": t.c.wall_s,
+            "device": describe_device(t.device),
             "final_policy": str(final),
-            "best_eval": list(self.c.best_eval),
+            "best_eval": list(t.c.best_eval),
         }
+        self.emit("on_end", summary)
+        return summary
 
-    def _now(self) -> float:
+    def now(self) -> float:
         """Wall seconds of the run, summed over resumed segments."""
         return time.perf_counter() - self._t0
 
-    def _progress_bar(self) -> Any:
-        if not self.cfg.progress or self.quiet:
-            return None
-        if self.cfg.dagger_rounds:  # no interaction: the bar counts the pre-training updates
-            total, done, unit = self._pretrain_total(), self.pretrained, "upd"
-        else:
-            total, done, unit = self.cfg.episodes, self.c.episodes, "ep"
-        return tqdm(total=total, initial=done, unit=unit, smoothing=0.05)
-
-    def _stop_reason(self) -> str:
-        cfg = self.cfg
-        if self.c.episodes >= cfg.episodes:
+    def stop_reason(self) -> str:
+        t, cfg = self.t, self.t.cfg
+        if t.c.episodes >= cfg.episodes:
             return "episodes"
-        if cfg.max_minutes > 0 and self._now() >= 60.0 * cfg.max_minutes:
+        if cfg.max_minutes > 0 and self.now() >= 60.0 * cfg.max_minutes:
             return "max_minutes"
-        if self._updates_done():
+        if t.updates_done():
             return "max_updates"
-        if cfg.dagger_rounds and self.pretrained >= self._pretrain_total():
+        if cfg.dagger_rounds and t.pretrained >= t.pretrain_total():
             return "dagger_rounds"
         return ""
 
-    def _pretrain_total(self) -> int:
-        """Pre-training updates of the run: `pretrain_updates` before each DAgger round and
-        after the last one."""
-        return self.cfg.pretrain_updates * (1 + self.cfg.dagger_rounds)
-
-    def _updates_done(self) -> bool:
-        return 0 < self.cfg.max_updates <= self.agent.updates
-
-    def _pretrain(self, logs: RunLogs, bar: Any) -> None:
+    def _pretrain(self) -> None:
         """DQfD pre-training: gradient updates on demonstrations only, before any interaction;
         with `dagger_rounds`, a round of labels every `pretrain_updates` updates (after an
         evaluation of the network about to be labelled)."""
-        nan = float("nan")
-        cfg = self.cfg
+        t, cfg = self.t, self.t.cfg
         while (
-            self.demo is not None
-            and self.pretrained < self._pretrain_total()
-            and not self._stop_reason()  # --max-minutes / --max-updates bound pre-training too
+            t.demo is not None
+            and t.pretrained < t.pretrain_total()
+            and not self.stop_reason()  # --max-minutes / --max-updates bound pre-training too
         ):
-            if self.dagger_round < min(self.pretrained // cfg.pretrain_updates, cfg.dagger_rounds):
+            if t.dagger_round < min(t.pretrained // cfg.pretrain_updates, cfg.dagger_rounds):
                 if self._unevaluated():
-                    self._periodic_eval(logs)
-                info = self.dagger_round_labels()
-                self.c.wall_s = self._now()
-                self.c.last_ckpt_s = self.c.wall_s
-                self.checkpoint()  # a resumed run does not label this round again
-                if not self.quiet:
-                    (bar.write if bar is not None else print)(
-                        f"pd-train: DAgger round {info['round']}: {info['labels']} labels "
-                        f"(agreement {info['agreement']:.1%}, student landed "
-                        f"{info['student_success_rate']:.1%}), {len(self.demo)} demonstrations"
-                    )
+                    self._periodic_eval()
+                info = t.dagger_round_labels()
+                t.c.wall_s = self.now()
+                t.c.last_ckpt_s = t.c.wall_s
+                t.checkpoint()  # a resumed run does not label this round again
+                self.emit("on_dagger_round", info)
                 continue
-            self.last_info = self.update(pretraining=True)
-            self.pretrained += 1
-            if self.pretrained % PRETRAIN_LOG_EVERY:
+            t.last_info = t.update(pretraining=True)
+            t.pretrained += 1
+            if t.pretrained % PRETRAIN_LOG_EVERY:
                 continue
-            self.c.wall_s = self._now()
-            logs.metrics.row(
-                self.c.wall_s, 0, self.agent.updates, 0, 1.0, *self._loss_row(), nan, nan
-            )
-            logs.metrics.flush()
-            if bar is not None:
-                if cfg.dagger_rounds:
-                    bar.update(PRETRAIN_LOG_EVERY)
-                    bar.set_postfix_str(f"DAgger rounds {self.dagger_round}/{cfg.dagger_rounds}")
-                else:
-                    bar.set_postfix_str(f"pretrain {self.pretrained}/{self._pretrain_total()}")
-            self._eval_and_checkpoint(logs, self._now())
+            t.c.wall_s = self.now()
+            self.emit("on_pretrain", t.c.wall_s)
+            self._eval_and_checkpoint(self.now())
 
-    def _env_step(self, eps: float, logs: RunLogs, bar: Any) -> None:
+    def _env_step(self, eps: float) -> None:
         """One batched epsilon-greedy step: n-step transitions into the replay, episode rows."""
-        cfg = self.cfg
-        actions = self.agent.act(self.obs, eps, self.rng)
-        nobs, r, term, trunc, info = self.env.step(actions)
-        self.c.env_steps += cfg.num_envs
-        self.ep_return += r
-        tr = self.collector.step(self.obs, actions, r, nobs, term, trunc, info.get("final_obs"))
-        self.replay.add(*tr)
+        t = self.t
+        actions = t.agent.act(t.obs, eps, t.rng)
+        nobs, r, term, trunc, info = t.env.step(actions)
+        t.c.env_steps += t.cfg.num_envs
+        t.ep_return += r
+        tr = t.collector.step(t.obs, actions, r, nobs, term, trunc, info.get("final_obs"))
+        t.replay.add(*tr)
         for i in np.flatnonzero(term | trunc):
-            self.c.episodes += 1
+            t.c.episodes += 1
             ok = bool(info["landed"][i])
-            self.c.successes += ok
-            logs.episodes.row(
-                self.c.episodes,
-                self._now(),
-                self.c.env_steps,
-                self.agent.updates,
-                float(self.ep_return[i]),
-                int(ok),
-                float(info["fuel_kg"][i]),
-                float(info["final_state"][i][5]),
-                eps,
-            )
-            self.recent.append((float(self.ep_return[i]), int(ok)))
-            self.ep_return[i] = 0.0
-            if self.outcomes is not None:
-                self.outcomes.record(int(info["scenario"][i]), ok)
-            if bar is not None:
-                bar.update(1)
-        if self.outcomes is not None and np.any(term | trunc):
-            self.env.set_scenario_probs(self.outcomes.probs())
-        self.obs = nobs
+            t.c.successes += ok
+            episode = Episode(
+                t.c.episodes, self.now(), t.c.env_steps, t.agent.updates,
+                float(t.ep_return[i]), int(ok), float(info["fuel_kg"][i]),
+                float(info["final_state"][i][5]), eps,
+            )  # fmt: skip
+            self.emit("on_episode", episode)
+            t.recent.append((float(t.ep_return[i]), int(ok)))
+            t.ep_return[i] = 0.0
+            if t.outcomes is not None:
+                t.outcomes.record(int(info["scenario"][i]), ok)
+        if t.outcomes is not None and np.any(term | trunc):
+            t.env.set_scenario_probs(t.outcomes.probs())
+        t.obs = nobs
 
-    def _log_metrics(self, logs: RunLogs, bar: Any, t: float, eps: float) -> None:
-        self.c.wall_s = t
-        ret = float(np.mean([x[0] for x in self.recent])) if self.recent else float("nan")
-        suc = float(np.mean([x[1] for x in self.recent])) if self.recent else float("nan")
-        logs.metrics.row(
-            t,
-            self.c.env_steps,
-            self.agent.updates,
-            self.c.episodes,
-            eps,
-            *self._loss_row(),
-            ret,
-            suc,
-        )
-        logs.flush()
-        if self.outcomes is not None:
-            self._log_scenarios(t)
-        if bar is not None:
-            bar.set_postfix_str(
-                f"eps {eps:.3f} succ100 {suc:.2f} loss {float(self.last_info.get('loss', 0)):.3g}"
-                f" upd {self.agent.updates}"
-            )
-
-    def _log_scenarios(self, t: float) -> None:
-        """scenarios.csv: each scenario's draw probability and recent training failure rate."""
-        assert self.outcomes is not None
-        if self._scenario_log is None:
-            names = [d.name for d in self.env.scenarios]
-            head = ("wall_s", "episodes", *(f"p_{n}" for n in names), *(f"fail_{n}" for n in names))
-            self._scenario_log = CsvLog(self.run_dir / "scenarios.csv", head)
-        self._scenario_log.row(
-            t, self.c.episodes, *map(float, self.outcomes.probs()),
-            *map(float, self.outcomes.failure_rates()),
-        )  # fmt: skip
-        self._scenario_log.flush()
-
-    def _eval_and_checkpoint(self, logs: RunLogs, t: float) -> None:
+    def _eval_and_checkpoint(self, now: float) -> None:
         """The periodic work shared by pre-training and interaction: evaluate, then checkpoint."""
-        if self._eval_due(t):
-            self._periodic_eval(logs)
-        if t - self.c.last_ckpt_s >= self.cfg.checkpoint_every_s:
-            self.c.wall_s = t
-            self.c.last_ckpt_s = t
-            self.checkpoint()
+        t = self.t
+        if self._eval_due(now):
+            self._periodic_eval()
+        if now - t.c.last_ckpt_s >= t.cfg.checkpoint_every_s:
+            t.c.wall_s = now
+            t.c.last_ckpt_s = now
+            t.checkpoint()
 
     def _unevaluated(self) -> bool:
         """Evaluations are on and the current network has not been evaluated yet."""
-        on = self.cfg.eval_every_updates > 0 or self.cfg.eval_every_s > 0
-        return on and self.c.last_eval_updates != self.agent.updates
+        cfg = self.t.cfg
+        on = cfg.eval_every_updates > 0 or cfg.eval_every_s > 0
+        return on and self.t.c.last_eval_updates != self.t.agent.updates
 
-    def _eval_due(self, t: float) -> bool:
+    def _eval_due(self, now: float) -> bool:
         """A periodic evaluation is due: by gradient updates (`eval_every_updates`) or else by
         wall time (`eval_every_s`)."""
-        cfg = self.cfg
+        t, cfg = self.t, self.t.cfg
         if cfg.eval_every_updates > 0:
-            return self.agent.updates - max(self.c.last_eval_updates, 0) >= cfg.eval_every_updates
-        return cfg.eval_every_s > 0 and t - self.c.last_eval_s >= cfg.eval_every_s
+            return t.agent.updates - max(t.c.last_eval_updates, 0) >= cfg.eval_every_updates
+        return cfg.eval_every_s > 0 and now - t.c.last_eval_s >= cfg.eval_every_s
 
-    def _loss_row(self) -> list[float]:
-        li = self.last_info  # device tensors on the device path: read back here only
-        keys = ("loss", "td_loss", "margin_loss", "q_mean")
-        return [float(li.get(k, float("nan"))) for k in keys]
-
-    def _periodic_eval(self, logs: RunLogs) -> None:
-        ev = self.evaluate()
-        t = self._now()
-        self.c.last_eval_s = t
-        self.c.last_eval_updates = self.agent.updates
-        self.c.wall_s = t
-        logs.evals.row(t, self.agent.updates, self.c.episodes, *ev.values())
-        logs.evals.flush()
+    def _periodic_eval(self) -> None:
+        """Evaluate the current network; a better one (success, then median fuel) is best.pt."""
+        t = self.t
+        ev = t.evaluate()
+        now = self.now()
+        t.c.last_eval_s = now
+        t.c.last_eval_updates = t.agent.updates
+        t.c.wall_s = now
         key = (ev["success_rate"], -ev["fuel_median"])
-        if key > tuple(self.c.best_eval):
-            self.c.best_eval = key
-            self.save_policies("best", {"periodic_eval": ev})
-        if self.on_eval is not None:
-            self.on_eval(
-                {**ev, "wall_s": t, "updates": self.agent.updates, "episodes": self.c.episodes}
-            )
-
-    def _plot_curves(self) -> None:
-        try:
-            training_curves(self.run_dir, self.run_dir / "curves.png")
-        except Exception as exc:  # noqa: BLE001 - plotting must never lose a trained model
-            print(f"pd-train: could not plot curves: {exc}")
+        if key > tuple(t.c.best_eval):
+            t.c.best_eval = key
+            t.save_policies("best", {"periodic_eval": ev})
+        self.emit("on_eval", ev, now)  # after best.pt: a sweep's scheduler may stop the run here

@@ -12,15 +12,14 @@ import dataclasses
 import json
 import time
 from collections import deque
-from collections.abc import Callable
-from dataclasses import replace
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from pd_core.config import REWARD, STATE_SCALE, RewardConfig
+from pd_core.config import STATE_SCALE
 from pd_core.dqn.actor import TorchGreedy, network_kwargs
 from pd_core.dqn.agent import DQNAgent, concat_samples
 from pd_core.dqn.checkpoint import (
@@ -30,15 +29,15 @@ from pd_core.dqn.checkpoint import (
     read_checkpoint,
     write_checkpoint,
 )
-from pd_core.dqn.config import TrainConfig, check_config
-from pd_core.dqn.demo_file import DEMO_FILE, demo_memory_for, write_demo_file
+from pd_core.dqn.config import TrainConfig, check_config, training_reward
+from pd_core.dqn.demo_file import Demonstrations, prepare_demonstrations
 from pd_core.dqn.demo_memory import label_part
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, describe_device, resolve_device
-from pd_core.dqn.loop import TrainingLoop
+from pd_core.dqn.loop import Callback, CurvesPlot, EvalReport, ProgressBar, RunFiles, TrainingLoop
 from pd_core.dqn.minibatch import DEMO, REPLAY, plan_of
 from pd_core.dqn.network import QNetwork
 from pd_core.dqn.replay import DemoMemory, NStepCollector, ReplayMemory, ReplaySample
-from pd_core.dqn.run_log import CsvLog, run_folder
+from pd_core.dqn.run_log import run_folder
 from pd_core.dqn.scenario_outcomes import ScenarioOutcomes
 from pd_core.episodes import rollout, summarise
 from pd_core.runtime.config import RuntimeConfig
@@ -51,12 +50,6 @@ from pd_core.vector_env import make_vector_env
 EvalCallback = Callable[[dict[str, float]], None]
 REPLAY_PATHS = ("host", "device", "device-numpy")
 """where the replay memories live and draw minibatches (`Trainer`'s `replay`)"""
-
-
-def training_reward(cfg: TrainConfig) -> RewardConfig:
-    """Eq. 12 with beta scaled by `fuel_weight` and the landing bonus raised by
-    `precision_bonus` (1.0 and 0.0: the paper's reward)."""
-    return replace(REWARD, beta=REWARD.beta * cfg.fuel_weight, precision_bonus=cfg.precision_bonus)
 
 
 def policy_metadata(cfg: TrainConfig, extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -116,9 +109,11 @@ class Counters:
     best_eval: tuple[float, float] = (-1.0, 0.0)  # (success rate, -median fuel)
 
 
-class Trainer(TrainingLoop):
+class Trainer:
     """Holds everything a run needs; `run()` trains until a stop criterion.
 
+    `run(callbacks)` trains through `pd_core.dqn.loop.TrainingLoop`, which reports to the run
+    folder's logs, the progress bar (unless `quiet`) and curves.png, then to `callbacks`;
     `on_eval` is called with every periodic evaluation (plus wall_s, updates, episodes): how a
     sweep reports to Ray Tune. `restore` (a checkpoint's state) continues a run exactly; use
     `Trainer.resume`.
@@ -138,9 +133,10 @@ class Trainer(TrainingLoop):
         on_eval: EvalCallback | None = None,
         restore: dict[str, Any] | None = None,
         replay: str | None = None,
+        demos: Demonstrations | None = None,
     ) -> None:
         check_config(cfg)
-        t_start = time.perf_counter()  # max_minutes counts the demonstrations built below
+        t_start = time.perf_counter()  # max_minutes counts the set-up and the demonstrations
         self.cfg = cfg
         self.quiet = quiet
         self.on_eval = on_eval
@@ -166,15 +162,16 @@ class Trainer(TrainingLoop):
             self.replay_gen.manual_seed(cfg.seed)
         self._device_update: DeviceUpdate | None = None
         self._q_cpu: Any = None
-        if restore is None:  # data first: read or build the demonstrations, then train
-            self.demo, self.demo_info = demo_memory_for(cfg, self.reward_cfg)
-        else:
-            self.demo, self.demo_info = None, {}
         self.run_dir = run_dir or run_folder(cfg)
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        if restore is None and self.demo is not None and not cfg.demo_memory:
-            # the memory built, with its provenance: `pd-train --demo-memory` trains on it again
-            write_demo_file(self.run_dir / DEMO_FILE, self.demo, cfg, self.demo_info)
+        self.demo: DemoMemory | None = None
+        self.demo_info: dict[str, Any] = {}
+        if restore is None and demos is not None:  # data first: built before the trainer
+            t_start -= demos.seconds  # max_minutes counts their build too
+        elif restore is None:  # no demonstrations given: read or built here
+            demos = prepare_demonstrations(cfg, self.run_dir)
+        if demos is not None:
+            self.demo, self.demo_info = demos.memory, demos.info
         if cfg.init_policy and restore is None:
             self._init_from_policy(cfg.init_policy)
         if cfg.input_norm_init and restore is None:
@@ -196,11 +193,9 @@ class Trainer(TrainingLoop):
         self.last_info: dict[str, float] = {}
         self.pretrained = 0
         self.dagger_round = 0  # DAgger rounds labelled so far (`cfg.dagger_rounds`)
-        self._scenario_log: CsvLog | None = None
         # the set-up counts towards max_minutes: `run` restarts the clock from wall_s (a resumed
         # run's wall_s comes from its checkpoint instead)
         self.c.wall_s = time.perf_counter() - t_start
-        self._t0 = t_start
         if restore is not None:
             self.load_state_dict(restore)
 
@@ -247,6 +242,29 @@ class Trainer(TrainingLoop):
             keep_trajectories=50,
         )
         return scale_state(np.concatenate(ro.trajectories))
+
+    def run(self, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
+        """Train until a stop criterion (`TrainingLoop`); the run's summary."""
+        reporters: list[Callback] = [RunFiles(), ProgressBar(self.quiet), CurvesPlot()]
+        if self.on_eval is not None:
+            reporters.append(EvalReport(self.on_eval))
+        return TrainingLoop(self, [*reporters, *callbacks]).run()
+
+    def pretrain_total(self) -> int:
+        """Pre-training updates of the run: `pretrain_updates` before each DAgger round and
+        after the last one."""
+        return self.cfg.pretrain_updates * (1 + self.cfg.dagger_rounds)
+
+    def updates_done(self) -> bool:
+        """`max_updates` gradient updates are done."""
+        return 0 < self.cfg.max_updates <= self.agent.updates
+
+    def finetune_lr(self) -> None:
+        """Pre-training is over: the optimiser goes on at `lr_finetune`."""
+        for group in self.agent.opt.param_groups:
+            group["lr"] = self.cfg.lr_finetune
+        if self._device_update is not None:
+            self._device_update.reset()  # a captured step keeps the lr it was captured with
 
     # ---- checkpoints
     def state_dict(self) -> dict[str, Any]:
@@ -403,5 +421,9 @@ def train(
     quiet: bool = False,
     on_eval: EvalCallback | None = None,
 ) -> dict[str, Any]:
-    """Train from scratch; returns a summary dict (see `Trainer.run`)."""
-    return Trainer(cfg, run_dir, quiet, on_eval).run()
+    """Train from scratch, data first: the demonstrations (`prepare_demonstrations`), then a
+    `Trainer` on them; returns the run's summary (see `Trainer.run`)."""
+    check_config(cfg)
+    run_dir = run_dir or run_folder(cfg)
+    demos = prepare_demonstrations(cfg, run_dir)
+    return Trainer(cfg, run_dir, quiet, on_eval, demos=demos).run()

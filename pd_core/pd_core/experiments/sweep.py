@@ -32,6 +32,7 @@ from ray import tune
 from pd_core import plots
 from pd_core.dqn.checkpoint import CHECKPOINT
 from pd_core.dqn.config import TrainConfig, current_names, preset
+from pd_core.dqn.demo_file import prepare_demonstrations
 from pd_core.dqn.train import Trainer
 
 SPEC = "sweep.json"
@@ -124,7 +125,8 @@ def run_trial(config: dict[str, Any]) -> None:
         for stale in run_dir.glob("*.csv"):  # logs of an attempt that died before checkpointing
             stale.unlink()
         cfg = preset(t["preset"], seed=t["seed"], run_dir=str(run_dir), progress=False, **overrides)
-        trainer = Trainer(cfg, run_dir=run_dir, quiet=True, on_eval=report)
+        demos = prepare_demonstrations(cfg, run_dir)  # data first
+        trainer = Trainer(cfg, run_dir=run_dir, quiet=True, on_eval=report, demos=demos)
     trainer.run()
 
 

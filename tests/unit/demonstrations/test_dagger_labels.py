@@ -7,9 +7,9 @@ import numpy as np
 from pd_core.actions import DEFAULT_ACTIONS
 from pd_core.config import DT_S
 from pd_core.demonstrations.dagger import label_transitions, student_labels
-from pd_core.dqn.config import preset
+from pd_core.dqn.config import preset, training_reward
 from pd_core.dqn.demo_memory import build_demo_memory
-from pd_core.dqn.train import Trainer, training_reward
+from pd_core.dqn.train import Trainer
 from pd_core.dynamics import step
 from pd_core.episodes import rollout
 from pd_core.runtime.policy_file import load_policy

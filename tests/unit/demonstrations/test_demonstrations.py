@@ -8,14 +8,13 @@ import pytest
 
 from pd_core.demonstrations.teacher_flown import controller_demonstrations
 from pd_core.dqn import demo_memory
-from pd_core.dqn.config import preset
+from pd_core.dqn.config import preset, training_reward
 from pd_core.dqn.demo_memory import (
     build_demo_memory,
     controller_steps,
     recovery_starts,
     recovery_steps,
 )
-from pd_core.dqn.train import training_reward
 from pd_core.episodes import rollout
 from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime

@@ -12,6 +12,7 @@ import torch
 from train_configs import small_config
 
 from pd_core.dqn import demo_file
+from pd_core.dqn.config import training_reward
 from pd_core.dqn.demo_file import (
     DEMO_FILE,
     FILE_FIELDS,
@@ -20,7 +21,7 @@ from pd_core.dqn.demo_file import (
     write_demo_file,
 )
 from pd_core.dqn.demo_memory import build_demo_memory
-from pd_core.dqn.train import Trainer, training_reward
+from pd_core.dqn.train import Trainer
 
 ROOT = Path(__file__).resolve().parents[3]
 STUDENT = str(ROOT / "models" / "pd_dqn_best.pt")

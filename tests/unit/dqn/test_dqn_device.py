@@ -16,6 +16,7 @@ from train_configs import small_config
 from pd_core.dqn.agent import DQNAgent
 from pd_core.dqn.config import TrainConfig, preset
 from pd_core.dqn.device import DeviceReplay, DeviceUpdate, resolve_device
+from pd_core.dqn.loop import loss_row
 from pd_core.dqn.replay import ReplayMemory
 from pd_core.dqn.train import Trainer
 
@@ -91,7 +92,7 @@ def test_device_code_path_on_cpu_with_the_host_index_draws_reproduces_the_cpu_ru
     assert _same(host, dev)
     assert (dev.c.episodes, dev.c.env_steps) == (host.c.episodes, host.c.env_steps)
     # the loss parts: tensors read back once on the device path, floats on the numpy one
-    np.testing.assert_array_equal(dev._loss_row(), host._loss_row())
+    np.testing.assert_array_equal(loss_row(dev.last_info), loss_row(host.last_info))
     assert json.loads((tmp_path / "dev" / "config.json").read_text())["run"]["replay"] == (
         "device-numpy"
     )
