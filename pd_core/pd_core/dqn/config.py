@@ -1,5 +1,10 @@
 """Training configuration: one dataclass, a docstring per field, turned into `pd-train` flags.
 
+The fields are flat (their names are the flags, the presets' and sweeps' keys and config.json's)
+and each belongs to one of `GROUPS`: run, network, update, replay, schedule, demonstrations,
+environment and evaluation. `cfg.group("replay")` reads one group, `cfg.grouped()` nests them and
+`pd-train --help` lists the flags group by group.
+
 Presets: `paper-agent1` (Table 2, with demonstrations), `paper-agent2` (no demonstrations, k = 200),
 `best` (what won our comparisons on the nominal problem), `robust` (issue 10: trained under
 dispersions from ZEM/ZEV demonstrations; see models/<name>.md) and `ocp` (issue 32: from
@@ -16,7 +21,7 @@ import inspect
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from pd_core.config import DQN_PAPER
+from pd_core.config import DQN_PAPER, REWARD, RewardConfig
 from pd_core.deprecation import renamed
 from pd_core.runtime.config import RuntimeConfig
 
@@ -203,9 +208,19 @@ class TrainConfig:
     folder under run_dir, named <preset>__<seed>"""
 
     def to_dict(self) -> dict[str, Any]:
+        """Flat: field -> value (config.json, checkpoints, policy files)."""
         d = dataclasses.asdict(self)
         d["hidden"] = list(self.hidden)
         return d
+
+    def group(self, name: str) -> ConfigGroup:
+        """A read-only view of the fields of one of `GROUPS`."""
+        return ConfigGroup(self, name)
+
+    def grouped(self) -> dict[str, dict[str, Any]]:
+        """Nested: group -> field -> value, in the order of `GROUPS`."""
+        d = self.to_dict()
+        return {name: {k: d[k] for k in members} for name, members in GROUPS.items()}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], overrides: dict[str, Any] | None = None) -> TrainConfig:
@@ -225,6 +240,87 @@ class TrainConfig:
     def shield(self, value: bool) -> None:
         renamed("TrainConfig.shield", "TrainConfig.layer")
         self.layer = value
+
+
+GROUPS: dict[str, tuple[str, ...]] = {
+    "run": (
+        "preset", "seed", "run_dir", "resume", "device", "loop", "agents", "address",
+        "torch_threads", "progress", "checkpoint_every_s",
+    ),
+    "network": (
+        "hidden", "activation", "near_pad", "thrust_input", "input_norm_init", "init_policy",
+    ),
+    "update": (
+        "optimizer", "lr", "lr_finetune", "grad_clip", "gamma", "double_dqn", "n_step", "loss",
+        "margin", "margin_value", "target_period", "weight_average",
+    ),
+    "replay": (
+        "num_envs", "updates_per_step", "learning_starts", "buffer_size", "batch_agent",
+        "batch_demo",
+    ),
+    "schedule": (
+        "episodes", "max_minutes", "max_updates", "epsilon0", "epsilon_final",
+        "epsilon_episodes", "pretrain_updates", "dagger_rounds",
+    ),
+    "demonstrations": (
+        "demos", "demo_memory", "controller", "controller_demo_episodes", "demo_landed_only",
+        "recovery_demo_episodes", "recovery_failed_share", "label_episodes", "label_noise",
+    ),
+    "environment": (
+        "dispersions", "scenario_sampling", "scenario_uniform_share", "scenario_window",
+        "fuel_weight", "precision_bonus", "layer", "layer_settings",
+    ),
+    "evaluation": ("eval_every_s", "eval_every_updates", "eval_episodes", "eval_seed"),
+}  # fmt: skip
+"""Every field of `TrainConfig` in one group: `pd-train --help` lists them so, `grouped()`
+nests them so and `cfg.group(name)` reads one group. The fields themselves stay flat, so every
+flag, preset, sweep FIELD=VALUE, config.json, checkpoint and policy file keeps its names."""
+GROUP_TITLES = {
+    "run": "run: where, how and under which seed it runs",
+    "network": "network: the Q-network and its inputs",
+    "update": "update: the loss and the optimiser (Eq. 11 and Table 2)",
+    "replay": "replay: environments, memories and minibatches",
+    "schedule": "schedule: when exploration, pre-training, DAgger rounds and the run end",
+    "demonstrations": "demonstrations: the teacher's episodes and labels",
+    "environment": "environment: dispersions, reward and the runtime layer",
+    "evaluation": "evaluation: the periodic greedy evaluations that pick best.pt",
+}
+
+
+class ConfigGroup:
+    """A read-only view of one group of a `TrainConfig`: `cfg.group("replay").batch_agent`;
+    a field of another group is an AttributeError, so code given a group reads only it."""
+
+    __slots__ = ("_cfg", "_name")
+
+    def __init__(self, cfg: TrainConfig, name: str) -> None:
+        if name not in GROUPS:
+            raise ValueError(f"no config group {name!r}; choose from {sorted(GROUPS)}")
+        object.__setattr__(self, "_cfg", cfg)
+        object.__setattr__(self, "_name", name)
+
+    def __getattr__(self, field_name: str) -> Any:
+        if field_name not in GROUPS[self._name]:
+            raise AttributeError(f"{field_name!r} is not in the config group {self._name!r}")
+        return getattr(self._cfg, field_name)
+
+    def __setattr__(self, field_name: str, value: Any) -> None:
+        raise AttributeError(f"config group {self._name!r} is read-only")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self._cfg.to_dict()
+        return {k: d[k] for k in GROUPS[self._name]}
+
+    def __repr__(self) -> str:
+        return f"ConfigGroup({self._name!r}, {self.to_dict()!r})"
+
+
+def group_of(field_name: str) -> str:
+    """The group a field belongs to."""
+    for name, members in GROUPS.items():
+        if field_name in members:
+            return name
+    raise KeyError(f"no TrainConfig field {field_name!r}")
 
 
 RENAMED_FIELDS = {"shield": "layer"}
@@ -464,6 +560,12 @@ def preset(name: str, **overrides: Any) -> TrainConfig:
     return replace(TrainConfig(), preset=name, **{**PRESETS[name], **current_names(overrides)})
 
 
+def training_reward(cfg: TrainConfig) -> RewardConfig:
+    """Eq. 12 with beta scaled by `fuel_weight` and the landing bonus raised by
+    `precision_bonus` (1.0 and 0.0: the paper's reward)."""
+    return replace(REWARD, beta=REWARD.beta * cfg.fuel_weight, precision_bonus=cfg.precision_bonus)
+
+
 def field_docs() -> dict[str, str]:
     """The docstring under each field (CleanRL style), read from the source."""
     src = inspect.getsource(TrainConfig).splitlines()
@@ -516,14 +618,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     An old name of RENAMED_FIELDS is a flag too (`--shield`, deprecated)."""
     docs = field_docs()
     by_name = {f.name: f for f in fields(TrainConfig)}
-    for f in by_name.values():
-        default = f.default if f.default is not dataclasses.MISSING else None
-        text = docs.get(f.name, "").replace("%", "%%")  # argparse formats help with %
-        help_ = f"{text} (preset default; base {default!r})"
-        parser.add_argument("--" + f.name.replace("_", "-"), **_flag(f, help_))
+    sections = {name: parser.add_argument_group(GROUP_TITLES[name]) for name in GROUPS}
+    for name, members in GROUPS.items():
+        for f in (by_name[m] for m in members):
+            default = f.default if f.default is not dataclasses.MISSING else None
+            text = docs.get(f.name, "").replace("%", "%%")  # argparse formats help with %
+            help_ = f"{text} (preset default; base {default!r})"
+            sections[name].add_argument("--" + f.name.replace("_", "-"), **_flag(f, help_))
     for old, new in RENAMED_FIELDS.items():
         help_ = f"deprecated: the old name of --{new.replace('_', '-')}"
-        parser.add_argument("--" + old.replace("_", "-"), dest=old, **_flag(by_name[new], help_))
+        sections[group_of(new)].add_argument(
+            "--" + old.replace("_", "-"), dest=old, **_flag(by_name[new], help_)
+        )
 
 
 def given_fields(ns: argparse.Namespace, skip: tuple[str, ...] = ("preset",)) -> dict[str, Any]:
@@ -540,6 +646,9 @@ def from_args(ns: argparse.Namespace) -> TrainConfig:
 
 __all__ = [
     "DEVICES",
+    "GROUPS",
+    "GROUP_TITLES",
+    "ConfigGroup",
     "LOOPS",
     "PRESETS",
     "RENAMED_FIELDS",
@@ -551,5 +660,7 @@ __all__ = [
     "field_docs",
     "from_args",
     "given_fields",
+    "group_of",
     "preset",
+    "training_reward",
 ]
