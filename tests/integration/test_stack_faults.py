@@ -233,7 +233,7 @@ def test_bursts_counted_in_full(stack, make_node, spin_until):
     for i in range(2000):
         msg = ThrustCommand(episode=10**6, step=i, action=500)  # unknown action: rejected
         msg.thrust = vec3([0.0, 0.0, 0.0])
-        publish_acked(cmd_pub, msg)  # a writer whose history is full waits for acks
+        publish_acked(cmd_pub, msg)  # a write Fast DDS refuses under load is retried
     assert wait_for(lambda: _rejected_total(sim.log()) >= before + 2000, 60.0), sim.log()[-2000:]
 
     fresh = stack["procs"].node(
