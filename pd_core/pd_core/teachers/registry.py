@@ -23,7 +23,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from pd_core.teachers.mpc_params import MPCParams
-from pd_core.teachers.zemzev import VERNIER_PARAMS, ZemZevController
+from pd_core.teachers.zemzev import VERNIER_HOLD_PARAMS, VERNIER_PARAMS, ZemZevController
 
 if TYPE_CHECKING:
     from pd_core.teachers.mpc import Actor, MPCController
@@ -117,6 +117,7 @@ def _mpc(objective: str) -> Callable[[], MPCController]:
 FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     "zemzev": ZemZevController,
     "zemzev-vernier": lambda: ZemZevController(VERNIER_PARAMS),
+    "zemzev-vernier-hold": lambda: ZemZevController(VERNIER_HOLD_PARAMS),
     "mpc-fuel": _mpc("fuel"),
     "mpc-energy": _mpc("energy"),
     "mpc-fuel-reserve": lambda: reserve_controller(ZemZevController(VERNIER_PARAMS)),
@@ -128,6 +129,12 @@ FACTORIES: dict[str, Callable[[], ZemZevController | MPCController]] = {
     ),
     "mpc-fuel-reserve-state-lf": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS), RESERVE_STATE_LF_PARAMS, "mpc-fuel-reserve-state-lf"
+    ),
+    # `mpc-fuel-reserve-state-lf` whose fallback holds the pad below the believed ground
+    "mpc-fuel-reserve-state-lf-hold": lambda: reserve_controller(
+        ZemZevController(VERNIER_HOLD_PARAMS),
+        RESERVE_STATE_LF_PARAMS,
+        "mpc-fuel-reserve-state-lf-hold",
     ),
     "mpc-fuel-reserve-state-ml-plan": lambda: reserve_controller(
         ZemZevController(VERNIER_PARAMS),

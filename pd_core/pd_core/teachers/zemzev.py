@@ -7,7 +7,8 @@ thrust gives at the observed mass if that is less, or less again when the latera
 time than the profile leaves) that flattens to v_land + c z near the pad; the horizontal axes use
 the ZEM/ZEV law a = -6 r / t_go^2 - 4 v / t_go, with t_go the time left on that braking profile.
 `zemzev-vernier` adds a terminal vernier below 5 m: the horizontal axes track a capped speed
-towards the pad (ZEM/ZEV's t_go floor otherwise overshoots it; see ZemZevParams).
+towards the pad (ZEM/ZEV's t_go floor otherwise overshoots it; see ZemZevParams), and
+`zemzev-vernier-hold` keeps that vernier down to the ground, with no flare below 0.5 m.
 The commanded thrust T = m (a - g) is rounded to the nearest of the 7 x 7 x 3 levels. It is
 Markov (a function of the state only), so a Q-network can imitate it, and it flies the disturbed
 env, so its transitions are on-distribution demonstrations.
@@ -18,7 +19,8 @@ It imports numpy only: the runtime layer (`pd_core.runtime`) flies it as its fal
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -80,6 +82,11 @@ class ZemZevParams:
 
 # ZEM/ZEV with the terminal vernier below 5 m (`zemzev-vernier`): a teacher that lands on the pad
 VERNIER_PARAMS = ZemZevParams(vernier_altitude_m=5.0)
+# ... whose vernier holds the pad all the way down, with no flare (`zemzev-vernier-hold`, issue 68):
+# under a navigation bias the lander may believe it is on the ground metres above it, and the flare
+# then only nulls the sideways speed while the disturbance carries it off the pad during the slow
+# descent that remains (docs/experiments/2026-12-05-nav-bias-is-vertical.md)
+VERNIER_HOLD_PARAMS = replace(VERNIER_PARAMS, flare_altitude_m=-math.inf)
 
 
 def braking_accel_mps2(
@@ -159,6 +166,8 @@ class ZemZevController:
     ) -> None:
         self.params = params or ZemZevParams()
         self.name = "zemzev-vernier" if self.params.vernier_altitude_m > 0.0 else "zemzev"
+        if self.params.vernier_altitude_m > 0.0 and self.params.flare_altitude_m == -math.inf:
+            self.name = "zemzev-vernier-hold"
         self.actions = actions
         self._lo = actions.limits.lo
         self._hi = actions.limits.hi

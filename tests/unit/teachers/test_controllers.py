@@ -12,6 +12,7 @@ from pd_core.runtime.config import RuntimeConfig
 from pd_core.runtime.layer import Runtime
 from pd_core.teachers.registry import make_controller
 from pd_core.teachers.zemzev import (
+    VERNIER_HOLD_PARAMS,
     VERNIER_PARAMS,
     ZemZevController,
     ZemZevParams,
@@ -116,6 +117,38 @@ def test_vernier_tracks_a_capped_speed_towards_the_pad_only_below_its_altitude()
     # K dt = 0.4: the sideways loop stays damped with two steps of delay (z^3 - z^2 + K dt)
     k_dt = VERNIER_PARAMS.vernier_gain_per_s * DT_S
     assert np.abs(np.roots([1.0, -1.0, 0.0, k_dt])).max() < 0.95
+
+
+def test_hold_keeps_steering_to_the_pad_where_the_vernier_flares():
+    """Below the 0.5 m flare, and below the believed ground, the vernier only nulls the sideways
+    speed (a = -0.5/s v); the hold variant keeps the vernier's command towards the pad."""
+    s = np.array([[2.0, 0.0, -2.0, 0.1, 0.0, -0.5, 1700.0]])  # believed 2 m under the ground
+    flare = ZemZevController(VERNIER_PARAMS).thrust_command(s)[0, 0:2]
+    hold = ZemZevController(VERNIER_HOLD_PARAMS).thrust_command(s)[0, 0:2]
+    assert flare == pytest.approx(1700.0 * -0.5 * np.array([0.1, 0.0]), rel=1e-12)
+    assert hold == pytest.approx(1700.0 * 2.0 * np.array([-0.4 - 0.1, 0.0]), rel=1e-12)
+    assert make_controller("zemzev-vernier-hold").name == "zemzev-vernier-hold"
+    assert (
+        make_controller("mpc-fuel-reserve-state-lf-hold").name == "mpc-fuel-reserve-state-lf-hold"
+    )
+
+
+def test_hold_stays_on_the_pad_under_a_navigation_bias():
+    """`nav-bias-5` (seed 7,000,000, 300 episodes, behind the layer): a lander that believes it is
+    on the ground metres too early drifts off the pad during the descent that remains (vernier: 8
+    off the pad); the hold keeps it there (2), and nominal landings stay as they were."""
+    off, nominal = {}, {}
+    for name, params in (("vernier", VERNIER_PARAMS), ("hold", VERNIER_HOLD_PARAMS)):
+        actor = Runtime(ZemZevController(params), RuntimeConfig())
+        ro = rollout(actor, 300, 7_000_000, dispersions=SCENARIOS["nav-bias-5"])
+        far = final_quantities(ro)["norm_ij_position_m"] >= 5.0
+        off[name] = int((~ro.landed & far).sum())
+        nominal[name] = rollout(actor, 300, 0)
+    assert off["vernier"] >= 5 and off["hold"] <= off["vernier"] // 2
+    assert nominal["hold"].landed.all()
+    assert nominal["hold"].fuel_kg.mean() == pytest.approx(
+        nominal["vernier"].fuel_kg.mean(), rel=0.005
+    )
 
 
 def test_vernier_lands_nearer_the_pad_than_zemzev():

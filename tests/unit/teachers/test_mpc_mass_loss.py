@@ -44,7 +44,7 @@ def test_new_fields_are_off_in_every_teacher_but_the_ml_and_lf_ones() -> None:
         if not isinstance(ctl, MPCController):
             continue
         ml = name in (ML_NAME, PLAN_NAME)
-        lf = ml or name == LF_NAME
+        lf = ml or name in (LF_NAME, LF_NAME + "-hold")
         assert ctl.params.brake_mass_loss is ml and ctl.params.layer_thrust_fraction is lf, name
         assert ctl.takes_thrust_fraction is lf
         assert (ctl._envelope() is not None) is (name == PLAN_NAME), name
