@@ -31,9 +31,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from pd_core.config import REWARD  # noqa: E402
 from pd_core.dispersions import load_scenarios  # noqa: E402
 from pd_core.episodes import rollout  # noqa: E402
+from pd_core.reward import missed_limits  # noqa: E402
 from pd_core.runtime.build import Built, build  # noqa: E402
 from pd_core.runtime.config import RuntimeConfig  # noqa: E402
 from pd_core.runtime.layer import Runtime  # noqa: E402
@@ -95,11 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     for built in [build(spec) for spec in a.specs] + [zemzev_slope(s) for s in a.zemzev_slope]:
         ro = rollout(built.actor, n, a.seed, dispersions=d, keep_trajectories=KEPT)
-        f = ro.final_states
-        off = np.hypot(f[:, 0], f[:, 1]) >= REWARD.x_lim_m
+        off, too_fast = missed_limits(ro.final_states[:, 0:3], ro.final_states[:, 3:6])
         failed = ~ro.landed
         late, far = failed & ~ro.terminated, failed & ro.terminated & off
-        fast = failed & ro.terminated & ~off
+        fast = failed & ro.terminated & too_fast & ~off
         per_bin = " ".join(f"{ro.landed[m].mean():6.1%}" if m.any() else "     -" for m in in_bin)
         speeds = " ".join(
             f"{descent_speed_at(ro.trajectories, bias[:KEPT], h):.2f}" for h in BELIEVED_ALTITUDES_M
