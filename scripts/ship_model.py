@@ -10,8 +10,9 @@ episode of its own). The report (.md) is written by hand from `pd-eval`'s output
 
 With --stages (the run folders of a multi-stage recipe, in order, the last one the shipped run),
 the JSON also gets `training.lineage`: the recipe command and, per stage, its pd-train command
-(preset, seed, initial policy), update count and every demonstration and label source as that
-stage's <policy>.json records them, so the file says what taught it without the runs folder.
+(preset, seed, a teacher other than the preset's, initial policy), update count and every
+demonstration and label source as that stage's <policy>.json records them, so the file says
+what taught it without the runs folder.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from pd_core.dqn.config import PRESETS
+
 KEEP = ("episode", "landed", "return", "k_velocity_mps", "fuel_kg", "epsilon")
 
 
@@ -31,6 +34,9 @@ def stage_record(number: int, run: Path, policy: str) -> dict:
     training = json.loads((run / f"{policy}.json").read_text())["training"]
     cfg = training["config"]
     command = f"pd-train --preset {cfg['preset']} --seed {cfg['seed']}"
+    preset_teacher = PRESETS.get(cfg["preset"], {}).get("controller")
+    if cfg.get("controller") not in (None, preset_teacher):  # a teacher the preset does not name
+        command += f" --controller {cfg['controller']}"
     if cfg.get("init_policy"):
         command += f" --init-policy {cfg['init_policy']}"
     return {

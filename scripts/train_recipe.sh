@@ -23,7 +23,9 @@
 #      selection curve on `adapt` is flat within its noise; docs/experiments/
 #      2026-12-05-adapt-student.md). --stage2 FILE starts it from FILE (models/pd_dqn_ocp.pt is
 #      stage 2 of seed 1) and skips stages 1 and 2: `--adapt --stage2 models/pd_dqn_ocp.pt`
-#      gives models/pd_dqn_adapt.pt.
+#      gives models/pd_dqn_adapt.pt. --adapt-teacher T labels stage 3 with teacher T instead:
+#      mpc-fuel-reserve-state-lf-hold (its ZEM/ZEV fallback holds the pad down to the ground)
+#      gives models/pd_dqn_hold.pt (docs/experiments/2026-12-06-hold-teacher-student.md).
 #
 # The demonstrator ablation (issue 32) keeps that recipe and its budget and changes only where
 # the demonstrations come from (--demonstrator):
@@ -52,7 +54,7 @@ set -euo pipefail
 usage() {
     cat <<'EOF'
 usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--paper-inputs]
-                              [--adapt] [--stage2 FILE.pt]
+                              [--adapt] [--stage2 FILE.pt] [--adapt-teacher T]
                               [--teacher zemzev-vernier|ocp] [--demonstrator D] [--threads N]
                               [--dry-run] [-h]
 
@@ -64,6 +66,9 @@ usage: scripts/train_recipe.sh [--seed S] [--out DIR] [--stage1 FILE.pt] [--pape
                    80 % until measured, weak engines and navigation biases); the policy is
                    DIR/stage3/final.pt
   --stage2 FILE    with --adapt: skip stages 1 and 2 and start stage 3 from this policy
+  --adapt-teacher T  with --adapt: stage 3's teacher, mpc-fuel-reserve-state-lf (the
+                   preset's, default) or mpc-fuel-reserve-state-lf-hold (models/pd_dqn_hold;
+                   default DIR runs/adapt_T__S)
   --teacher T      ocp (default: the optimal-control teacher's recipe above, demonstrations
                    then aggregated DAgger rounds; the policy is DIR/stage2/best.pt) or
                    zemzev-vernier (the older ZEM/ZEV-lineage recipe; the policy is
@@ -98,6 +103,8 @@ dry=0
 threads=2
 teacher=ocp
 recipe_teacher=mpc-fuel-reserve-state  # what the ocp presets name (pd_core.dqn.config)
+adapt_preset_teacher=mpc-fuel-reserve-state-lf  # what the ocp-adapt preset names
+adapt_teacher=$adapt_preset_teacher
 demonstrator=$recipe_teacher
 near_pad=(--near-pad)
 while [[ $# -gt 0 ]]; do
@@ -108,6 +115,7 @@ while [[ $# -gt 0 ]]; do
         --stage1) stage1="${2:?--stage1 needs a policy file}"; shift 2 ;;
         --stage2) stage2="${2:?--stage2 needs a policy file}"; shift 2 ;;
         --adapt) adapt=1; shift ;;
+        --adapt-teacher) adapt_teacher="${2:?--adapt-teacher needs a value}"; shift 2 ;;
         --paper-inputs) near_pad=(); shift ;;
         --teacher) teacher="${2:?--teacher needs zemzev-vernier or ocp}"; shift 2 ;;
         --demonstrator) demonstrator="${2:?--demonstrator needs a value}"; shift 2 ;;
@@ -122,6 +130,11 @@ done
 [[ -z "$stage2" || -f "$stage2" ]] || { echo "train_recipe.sh: --stage2 file not found: $stage2" >&2; exit 2; }
 [[ -z "$stage2" ]] || ((adapt)) || { echo "train_recipe.sh: --stage2 needs --adapt" >&2; exit 2; }
 ((adapt == 0)) || [[ "$teacher" == ocp && "$demonstrator" == "$recipe_teacher" ]] || { echo "train_recipe.sh: --adapt needs --teacher ocp and the recipe's demonstrator" >&2; exit 2; }
+case "$adapt_teacher" in
+    mpc-fuel-reserve-state-lf | mpc-fuel-reserve-state-lf-hold) ;;
+    *) echo "train_recipe.sh: --adapt-teacher must be mpc-fuel-reserve-state-lf or mpc-fuel-reserve-state-lf-hold, got '$adapt_teacher'" >&2; exit 2 ;;
+esac
+[[ "$adapt_teacher" == "$adapt_preset_teacher" ]] || ((adapt)) || { echo "train_recipe.sh: --adapt-teacher needs --adapt" >&2; exit 2; }
 [[ "$teacher" == zemzev-vernier || "$teacher" == ocp ]] || { echo "train_recipe.sh: --teacher must be zemzev-vernier or ocp, got '$teacher'" >&2; exit 2; }
 case "$demonstrator" in
     mpc-fuel-reserve-state | mpc-fuel-reserve | zemzev-vernier | open-loop | none) ;;
@@ -130,6 +143,8 @@ esac
 [[ "$demonstrator" == "$recipe_teacher" || "$teacher" == ocp ]] || { echo "train_recipe.sh: --demonstrator needs --teacher ocp" >&2; exit 2; }
 if [[ "$teacher" == ocp && "$demonstrator" != "$recipe_teacher" ]]; then
     out="${out:-runs/ablation_${demonstrator}__$seed}"
+elif [[ "$teacher" == ocp && "$adapt_teacher" != "$adapt_preset_teacher" ]]; then
+    out="${out:-runs/adapt_${adapt_teacher}__$seed}"
 elif [[ "$teacher" == ocp ]]; then
     out="${out:-runs/ocp__$seed}"
 else
@@ -187,7 +202,9 @@ if [[ "$teacher" == ocp ]]; then
         stage2="$out/stage2/best.pt"
     fi
     if ((adapt)); then
-        stage stage3 --preset ocp-adapt --init-policy "$stage2"
+        arm3=()
+        [[ "$adapt_teacher" != "$adapt_preset_teacher" ]] && arm3=(--controller "$adapt_teacher")
+        stage stage3 --preset ocp-adapt "${arm3[@]}" --init-policy "$stage2"
         ((dry)) || echo "== recipe done in $(((SECONDS - start) / 60)) min: $out/stage3/final.pt"
         exit 0
     fi

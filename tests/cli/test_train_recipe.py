@@ -144,6 +144,16 @@ def test_recipe_from_a_given_stage1_policy_has_two_stages(tmp_path, capsys):
     assert s3["init_policy"] == f"{tmp_path}/z/stage2/best.pt"
 
 
+def test_adapt_teacher_changes_only_stage_3s_teacher(tmp_path, capsys):
+    args = ("--adapt", "--stage2", "models/pd_dqn_ocp.pt", "--out", str(tmp_path / "r"))
+    (base,) = stage_configs(capsys, *args)
+    (hold,) = stage_configs(capsys, *args, "--adapt-teacher", "mpc-fuel-reserve-state-lf-hold")
+    assert base["controller"] == "mpc-fuel-reserve-state-lf"
+    assert hold == {**base, "controller": "mpc-fuel-reserve-state-lf-hold"}
+    (named,) = stage_configs(capsys, *args[:3], "--adapt-teacher", "mpc-fuel-reserve-state-lf-hold")
+    assert named["run_dir"] == "runs/adapt_mpc-fuel-reserve-state-lf-hold__1/stage3"
+
+
 def test_paper_inputs_fine_tune_without_the_near_pad_inputs(tmp_path, capsys):
     configs = stage_configs(
         capsys, "--teacher", "zemzev-vernier", "--paper-inputs", "--out", str(tmp_path / "r")
@@ -190,6 +200,8 @@ def test_an_interrupted_stage_is_resumed_from_its_checkpoint(tmp_path):
         (["--teacher", "ocp", "--demonstrator", "x"], "--demonstrator must be mpc-fuel"),
         (["--teacher", "zemzev-vernier", "--demonstrator", "none"], "needs --teacher ocp"),
         (["--threads", "0"], "--threads must be a positive integer"),
+        (["--adapt-teacher", "mpc-fuel-reserve-state-lf-hold"], "--adapt-teacher needs --adapt"),
+        (["--adapt", "--adapt-teacher", "zemzev"], "--adapt-teacher must be mpc-fuel"),
     ],
 )
 def test_bad_flag_is_one_line(args, named):
