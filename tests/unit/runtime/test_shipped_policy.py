@@ -61,3 +61,20 @@ def test_it_pins_80_percent_until_measured_and_sees_the_thrust_fraction() -> Non
     ro = rollout(rt, 20, 0)
     assert ro.landed.sum() >= 19
     assert rt.changed < 0.2 * ro.steps.sum()  # the layer decides a minority of the steps
+
+
+def test_the_hold_file_differs_from_the_default_only_by_its_stage_3_teacher() -> None:
+    hold = ROOT / "models" / "pd_dqn_hold"
+    lineage = _lineage(hold)
+    assert "--adapt-teacher mpc-fuel-reserve-state-lf-hold --seed 1" in lineage["recipe"]
+    (stage3,) = lineage["stages"]
+    assert stage3["command"] == (
+        "pd-train --preset ocp-adapt --seed 1 --controller mpc-fuel-reserve-state-lf-hold"
+        " --init-policy models/pd_dqn_ocp.pt"
+    )
+    assert _teachers_of(stage3) == {"mpc-fuel-reserve-state-lf-hold"}
+    meta = {m: json.loads(m.with_suffix(".json").read_text()) for m in (hold, MODEL)}
+    assert meta[hold]["runtime"] == meta[MODEL]["runtime"]
+    rt = load_policy(hold.with_suffix(".pt"))
+    assert rt.actor.takes_thrust_fraction
+    assert rollout(rt, 20, 0).landed.sum() >= 19
