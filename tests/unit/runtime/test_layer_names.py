@@ -99,8 +99,12 @@ def test_a_training_config_with_shield_reads_as_layer():
 def test_every_shipped_files_training_config_still_reads(model):
     """A file's metadata keeps its training config as it was written, "shield" and all; it reads
     with `layer` (what the file flies is its pinned runtime config, which the rename left
-    alone)."""
+    alone). A file trained after the rename has `layer` itself."""
     config = json.loads((MODELS / f"{model}.json").read_text())["training"]["config"]
+    if "layer" in config:  # trained after the rename
+        assert "shield" not in config
+        assert TrainConfig.from_dict(config).layer is config["layer"]
+        return
     if "shield" not in config:  # trained before there was one
         assert TrainConfig.from_dict(config).layer is False
         return
