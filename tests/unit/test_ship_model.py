@@ -75,20 +75,17 @@ def test_stages_must_end_with_the_shipped_run(tmp_path: Path) -> None:
 def test_a_stage_taught_by_a_teacher_its_preset_does_not_name_says_so(tmp_path: Path) -> None:
     run = fake_run(tmp_path / "stage3", "ocp-adapt", "models/a.pt", {"controller": [TEACHER]}, 9)
     meta = json.loads((run / "final.json").read_text())
-    meta["training"]["config"]["controller"] = "mpc-fuel-reserve-state-lf-hold"
-    (run / "final.json").write_text(json.dumps(meta))
-    ship(run, tmp_path / "models" / "x", "final", "train_recipe.sh --adapt", [run])
-    (stage,) = json.loads((tmp_path / "models" / "x.json").read_text())["training"]["lineage"][
-        "stages"
-    ]
-    assert stage["command"] == (
+
+    def command(controller: str) -> str:
+        meta["training"]["config"]["controller"] = controller
+        (run / "final.json").write_text(json.dumps(meta))
+        ship(run, tmp_path / "models" / "x", "final", "train_recipe.sh --adapt", [run])
+        shipped = json.loads((tmp_path / "models" / "x.json").read_text())
+        (stage,) = shipped["training"]["lineage"]["stages"]
+        return stage["command"]
+
+    assert command("mpc-fuel-reserve-state-lf-hold") == (
         "pd-train --preset ocp-adapt --seed 7 --controller mpc-fuel-reserve-state-lf-hold"
         " --init-policy models/a.pt"
     )
-    meta["training"]["config"]["controller"] = "mpc-fuel-reserve-state-lf"  # the preset's own
-    (run / "final.json").write_text(json.dumps(meta))
-    ship(run, tmp_path / "models" / "y", "final", "train_recipe.sh --adapt", [run])
-    (stage,) = json.loads((tmp_path / "models" / "y.json").read_text())["training"]["lineage"][
-        "stages"
-    ]
-    assert "--controller" not in stage["command"]
+    assert "--controller" not in command("mpc-fuel-reserve-state-lf")  # the preset's own
